@@ -1,0 +1,69 @@
+"""What every detector (residual generator + test) shares: the ``Residual`` record and the contract.
+
+A detector is designed from a :class:`~fdi_sim.linear.model.LinearModel` (or a set of them),
+then run with ``reset(rng)`` / ``step(t_s, u, y) -> Residual``. ``u`` and ``y`` are absolute
+values in the model's input and output order; a detector built from a model subtracts the
+model's trim values ``u0``/``y0`` itself.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+@dataclass(frozen=True, eq=False)
+class Residual:
+    """One step of one detector.
+
+    Attributes
+    ----------
+    t_s : float
+        Time of the step [s].
+    r : NDArray
+        The residual vector (the detector's own units; normalized where the method normalizes).
+    statistic : float
+        The scalar test statistic (e.g. ``r' S^-1 r`` for a chi-square test).
+    dof : int
+        Degrees of freedom of the statistic (0 if not chi-square).
+    threshold : float
+        The alarm threshold on ``statistic``.
+    alarm : bool
+        ``statistic > threshold`` (after whatever the detector's own test logic is).
+    isolation : str or None
+        Name of the fault hypothesis the detector points at, or None (no alarm or rejected).
+    scores : NDArray or None
+        Per-hypothesis isolation scores (angles [rad], probabilities...), in ``hypotheses`` order.
+    valid : bool
+        False while the detector is still filling its window or converging.
+    """
+
+    t_s: float
+    r: NDArray[np.float64]
+    statistic: float
+    dof: int
+    threshold: float
+    alarm: bool
+    isolation: str | None = None
+    scores: NDArray[np.float64] | None = None
+    valid: bool = True
+
+
+@runtime_checkable
+class Detector(Protocol):
+    """The contract of every registered detector."""
+
+    #: versioned registry id, e.g. ``"parity-robust-v1"``
+    id: str
+    #: names of the fault hypotheses the detector can isolate (order of ``Residual.scores``)
+    hypotheses: tuple[str, ...]
+
+    def reset(self, rng: np.random.Generator | None = None) -> None:
+        """Clear windows and filter states."""
+        ...
+
+    def step(self, t_s: float, u: NDArray[np.float64], y: NDArray[np.float64]) -> Residual:
+        """Process one sample: time [s], inputs ``u``, measurements ``y`` (model order)."""
+        ...
