@@ -1,0 +1,213 @@
+"""The JSBSim adapter: one ``Aircraft`` per simulation, the only place ``jsbsim`` is driven.
+
+It loads a model from the patched JSBSim root (:mod:`fdi_sim.aircraft.overlays`), starts the
+engines, trims (:mod:`fdi_sim.aircraft.trim`), sets the atmosphere, reads signals by their
+suffixed names through cached property nodes, and steps. Units at this boundary are the
+suffixed names of :mod:`fdi_sim.aircraft.properties`.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+os.environ.setdefault("JSBSIM_DEBUG", "0")  # silence the banner before the first FGFDMExec
+import jsbsim  # noqa: E402
+
+from fdi_sim.aircraft.overlays import jsbsim_root  # noqa: E402
+from fdi_sim.aircraft.properties import property_map  # noqa: E402
+from fdi_sim.errors import FdiSimError  # noqa: E402
+from fdi_sim.units import FPS_PER_KT  # noqa: E402
+
+#: JSBSim model names fdi-sim knows, with a one-line description
+AIRCRAFT: dict[str, str] = {
+    "f16": "General Dynamics F-16 (JSBSim f16, FBW pitch/roll/yaw loops, F100 turbofan)",
+    "DHC6": "de Havilland Canada DHC-6 Twin Otter (JSBSim DHC6, two PT6A-27 turboprops)",
+}
+
+#: MIL-F-8785C turbulence levels: JSBSim probability-of-exceedance index and wind at 20 ft [kt]
+TURBULENCE_LEVELS: dict[str, tuple[int, float]] = {
+    "none": (0, 0.0),
+    "light": (3, 15.0),
+    "moderate": (4, 30.0),
+    "severe": (6, 45.0),
+}
+
+
+class UnknownAircraftError(FdiSimError, KeyError):
+    """The aircraft name is not one of :data:`AIRCRAFT`."""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+@dataclass(frozen=True)
+class Atmosphere:
+    """Steady wind and MIL-F-8785C (Dryden, JSBSim ``ttMilspec``) turbulence.
+
+    Attributes
+    ----------
+    turbulence : str
+        One of :data:`TURBULENCE_LEVELS`.
+    wind_from_deg : float
+        Direction the steady wind blows from [deg true].
+    wind_speed_kts : float
+        Steady wind speed [kt].
+    """
+
+    turbulence: str = "none"
+    wind_from_deg: float = 0.0
+    wind_speed_kts: float = 0.0
+
+
+class Aircraft:
+    """A JSBSim aircraft ready to trim and fly.
+
+    Parameters
+    ----------
+    name : str
+        ``"f16"`` or ``"DHC6"``.
+    dt_s : float
+        Integration step [s] (JSBSim's default is 1/120 s).
+    """
+
+    def __init__(self, name: str, dt_s: float = 1.0 / 120.0) -> None:
+        if name not in AIRCRAFT:
+            raise UnknownAircraftError(f"unknown aircraft {name!r}; known: {', '.join(AIRCRAFT)}")
+        self.name = name
+        self.dt_s = float(dt_s)
+        self.fdm = jsbsim.FGFDMExec(str(jsbsim_root()))
+        self.fdm.set_debug_level(0)
+        if not self.fdm.load_model(name):
+            raise UnknownAircraftError(f"JSBSim could not load {name!r}")
+        self.fdm.set_dt(self.dt_s)
+        self.n_engines = self.fdm.get_propulsion().get_num_engines()
+        self._pm = self.fdm.get_property_manager()
+        self._map = property_map(name)
+        self._node_cache: dict[str, object] = {}
+        self.frozen_nodes: dict[str, object] = {}
+
+    # ------------------------------------------------------------------ properties
+    def __getitem__(self, prop: str) -> float:
+        """Raw JSBSim property read (adapter-internal and tests)."""
+        return float(self.fdm[prop])
+
+    def __setitem__(self, prop: str, value: float) -> None:
+        self.fdm[prop] = value
+
+    def node(self, prop: str) -> object:
+        """Cached ``FGPropertyNode`` for a JSBSim property (fast reads and writes)."""
+        n = self._node_cache.get(prop)
+        if n is None:
+            n = self._pm.get_node(prop, False)
+            if n is None:
+                raise KeyError(f"{self.name} has no property {prop!r}")
+            self._node_cache[prop] = n
+        return n
+
+    def signal_names(self) -> tuple[str, ...]:
+        return tuple(self._map)
+
+    def reader(self, names: Sequence[str]) -> Callable[[], NDArray[np.float64]]:
+        """A fast closure returning the named signals as a new float64 array.
+
+        Signals whose property is ``a+b`` are summed (DHC-6 thrust of both engines).
+        """
+        getters: list[Callable[[], float]] = []
+        for name in names:
+            if name not in self._map:
+                raise KeyError(f"unknown signal {name!r} for {self.name}")
+            parts = [self.node(p).get_double_value for p in self._map[name].split("+")]
+            if len(parts) == 1:
+                getters.append(parts[0])
+            else:
+                getters.append(lambda parts=parts: sum(g() for g in parts))
+        n = len(getters)
+
+        def read() -> NDArray[np.float64]:
+            return np.fromiter((g() for g in getters), dtype=np.float64, count=n)
+
+        return read
+
+    def read(self, names: Sequence[str]) -> NDArray[np.float64]:
+        """Read the named signals once (slow path; use :meth:`reader` in loops)."""
+        return self.reader(names)()
+
+    def get(self, name: str) -> float:
+        """One signal by its suffixed name."""
+        return float(self.read([name])[0])
+
+    def command_writer(self) -> Callable[[float, float, float, float], None]:
+        """A fast closure ``write(elevator, aileron, rudder, throttle)`` of normalized commands.
+
+        The throttle goes to every engine.
+        """
+        e = self.node("fcs/elevator-cmd-norm").set_double_value
+        a = self.node("fcs/aileron-cmd-norm").set_double_value
+        r = self.node("fcs/rudder-cmd-norm").set_double_value
+        thr = [self.node(f"fcs/throttle-cmd-norm[{i}]").set_double_value for i in range(self.n_engines)]
+
+        if len(thr) == 1:
+            t0 = thr[0]
+
+            def write(el: float, ai: float, ru: float, th: float) -> None:
+                e(el); a(ai); r(ru); t0(th)  # noqa: E702
+        else:
+            def write(el: float, ai: float, ru: float, th: float) -> None:
+                e(el); a(ai); r(ru)  # noqa: E702
+                for t in thr:
+                    t(th)
+
+        return write
+
+    # ------------------------------------------------------------------ write protection
+    def hold_property(self, prop: str, value: float | None = None) -> None:
+        """Hold a property at ``value`` (or its current value) against the FCS's writes.
+
+        JSBSIM_NOTES sec. 3.4: clearing the WRITE attribute makes the FCS's writes fail silently.
+        """
+        node = self.node(prop)
+        if value is not None:
+            node.set_attribute(jsbsim.Attribute.WRITE, True)
+            node.set_double_value(float(value))
+        node.set_attribute(jsbsim.Attribute.WRITE, False)
+        self.frozen_nodes[prop] = node
+
+    def force_property(self, prop: str, value: float) -> None:
+        """Write a held property (used each step by actuator faults)."""
+        node = self.frozen_nodes[prop]
+        node.set_attribute(jsbsim.Attribute.WRITE, True)
+        node.set_double_value(float(value))
+        node.set_attribute(jsbsim.Attribute.WRITE, False)
+
+    def release_property(self, prop: str) -> None:
+        """Give a held property back to the FCS."""
+        node = self.frozen_nodes.pop(prop, None)
+        if node is not None:
+            node.set_attribute(jsbsim.Attribute.WRITE, True)
+
+    # ------------------------------------------------------------------ atmosphere and stepping
+    def set_atmosphere(self, atm: Atmosphere, seed: int) -> None:
+        """Set steady wind and turbulence; ``seed`` seeds JSBSim's own random generator."""
+        fdm = self.fdm
+        fdm["simulation/randomseed"] = int(seed) % (2**31 - 1)
+        poe, w20_kts = TURBULENCE_LEVELS[atm.turbulence]
+        fdm["atmosphere/turb-type"] = 3 if poe else 0  # 3 = ttMilspec (Dryden, MIL-F-8785C)
+        fdm["atmosphere/turbulence/milspec/severity"] = poe
+        fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = w20_kts * FPS_PER_KT
+        # wind blowing FROM psi: the air moves toward psi + 180 deg (NED components)
+        spd = atm.wind_speed_kts * FPS_PER_KT
+        to = np.radians(atm.wind_from_deg + 180.0)
+        fdm["atmosphere/wind-north-fps"] = spd * np.cos(to)
+        fdm["atmosphere/wind-east-fps"] = spd * np.sin(to)
+
+    def step(self) -> bool:
+        """One JSBSim step of ``dt_s``; False if JSBSim asked to stop."""
+        return bool(self.fdm.run())
+
+    @property
+    def t_s(self) -> float:
+        return float(self.fdm.get_sim_time())

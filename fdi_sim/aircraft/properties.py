@@ -1,0 +1,92 @@
+"""The one table between JSBSim property names and fdi-sim's unit-suffixed signal names.
+
+Everything outside ``fdi_sim.aircraft`` speaks only the suffixed names. A few signals map to
+different properties on each aircraft (the DHC-6 aero model reads the *left* aileron only).
+"""
+from __future__ import annotations
+
+from types import MappingProxyType
+
+# name -> JSBSim property, common to both aircraft
+_COMMON: dict[str, str] = {
+    "t_s": "simulation/sim-time-sec",
+    # air-relative and inertial velocities
+    "vt_fps": "velocities/vt-fps",
+    "vc_kts": "velocities/vc-kts",  # calibrated airspeed, about KIAS
+    "mach": "velocities/mach",
+    "alpha_rad": "aero/alpha-rad",
+    "beta_rad": "aero/beta-rad",
+    "u_body_fps": "velocities/u-fps",
+    "v_body_fps": "velocities/v-fps",
+    "w_body_fps": "velocities/w-fps",
+    "hdot_fps": "velocities/h-dot-fps",
+    "gamma_rad": "flight-path/gamma-rad",
+    # body rates relative to the Earth frame (what a strapdown gyro minus earth rate sees)
+    "p_radps": "velocities/p-rad_sec",
+    "q_radps": "velocities/q-rad_sec",
+    "r_radps": "velocities/r-rad_sec",
+    # attitude
+    "phi_rad": "attitude/phi-rad",
+    "theta_rad": "attitude/theta-rad",
+    "psi_rad": "attitude/psi-rad",
+    # position
+    "h_ft": "position/h-sl-ft",
+    "h_agl_ft": "position/h-agl-ft",
+    "lat_deg": "position/lat-geod-deg",
+    "lon_deg": "position/long-gc-deg",
+    # specific force at the pilot station [g]; JSBSim sign: nz = -1 in level flight
+    "nx_g": "accelerations/n-pilot-x-norm",
+    "ny_g": "accelerations/n-pilot-y-norm",
+    "nz_g": "accelerations/n-pilot-z-norm",
+    "qbar_psf": "aero/qbar-psf",
+    # atmosphere: turbulence velocity (NED) as JSBSim computes it
+    "turb_north_fps": "atmosphere/turb-north-fps",
+    "turb_east_fps": "atmosphere/turb-east-fps",
+    "turb_down_fps": "atmosphere/turb-down-fps",
+    # pilot commands (inputs)
+    "elevator_cmd_norm": "fcs/elevator-cmd-norm",
+    "aileron_cmd_norm": "fcs/aileron-cmd-norm",
+    "rudder_cmd_norm": "fcs/rudder-cmd-norm",
+    "throttle_cmd_norm": "fcs/throttle-cmd-norm",
+    "pitch_trim_cmd_norm": "fcs/pitch-trim-cmd-norm",
+    # surface positions read by the aero model
+    "elevator_pos_rad": "fcs/elevator-pos-rad",
+    "rudder_pos_rad": "fcs/rudder-pos-rad",
+}
+
+_PER_AIRCRAFT: dict[str, dict[str, str]] = {
+    "f16": {
+        "aileron_pos_rad": "fcs/aileron-pos-rad",
+        "throttle_pos_norm": "fcs/throttle-pos-norm",
+        "thrust_lbf": "propulsion/engine/thrust-lbs",
+        "flaps_pos_rad": "fcs/tef-pos-rad",  # trailing-edge flaps (automatic; 0 above 250 KCAS)
+    },
+    "DHC6": {
+        "aileron_pos_rad": "fcs/left-aileron-pos-rad",
+        "throttle_pos_norm": "fcs/throttle-pos-norm",
+        "thrust_lbf": "propulsion/engine[0]/thrust-lbs+propulsion/engine[1]/thrust-lbs",  # '+' sums
+        "flaps_pos_rad": "fcs/flap-pos-rad",
+    },
+}
+
+#: signals of the truth state, in the order logged on ``/truth/state``
+TRUTH_SIGNALS: tuple[str, ...] = (
+    "vt_fps", "vc_kts", "mach", "alpha_rad", "beta_rad", "p_radps", "q_radps", "r_radps",
+    "phi_rad", "theta_rad", "psi_rad", "h_ft", "hdot_fps", "gamma_rad", "nx_g", "ny_g", "nz_g",
+    "u_body_fps", "v_body_fps", "w_body_fps", "qbar_psf", "lat_deg", "lon_deg",
+    "turb_north_fps", "turb_east_fps", "turb_down_fps",
+)
+#: the pilot's commands, in the order logged on ``/commands/pilot``
+COMMAND_SIGNALS: tuple[str, ...] = ("elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm", "throttle_cmd_norm")
+#: what the plant actually flies, logged on ``/truth/surfaces``
+SURFACE_SIGNALS: tuple[str, ...] = (
+    "elevator_pos_rad", "aileron_pos_rad", "rudder_pos_rad", "throttle_pos_norm", "thrust_lbf", "flaps_pos_rad",
+)
+
+
+def property_map(aircraft: str) -> MappingProxyType[str, str]:
+    """Signal name -> JSBSim property for one aircraft (``"f16"`` or ``"DHC6"``-based)."""
+    base = "DHC6" if aircraft.startswith("DHC6") else aircraft
+    if base not in _PER_AIRCRAFT:
+        raise KeyError(aircraft)
+    return MappingProxyType({**_COMMON, **_PER_AIRCRAFT[base]})

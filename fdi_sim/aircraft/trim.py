@@ -1,0 +1,297 @@
+"""Trim both aircraft to an operating point (JSBSIM_NOTES sec. 0-2).
+
+* F-16: engines running, gear up, FBW on, JSBSim's full trim (mode 1) or turn trim (mode 5).
+* DHC-6: JSBSim's trim misses the propeller reaction torque (``FGTurboProp`` gives 0 HP at
+  dt = 0), so it is refined by :func:`trim_running`: Newton's method on the body accelerations
+  evaluated with a tiny *real* step, over z = [alpha, phi, throttle, pitch trim, aileron, rudder],
+  with beta held at -0.3 deg to keep off the |beta| kink of the DHC-6 ``Clb`` table.
+
+Every trim is checked afterwards: the accelerations of a tiny real step must be small, or a
+:class:`~fdi_sim.errors.TrimError` says which point and why.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+
+import jsbsim
+import numpy as np
+from numpy.typing import NDArray
+
+from fdi_sim.aircraft.model import Aircraft
+from fdi_sim.errors import TrimError
+from fdi_sim.operating_point import OperatingPoint
+from fdi_sim.units import G0_FPS2, RAD_PER_DEG
+
+_ACC = (
+    "accelerations/udot-ft_sec2", "accelerations/vdot-ft_sec2", "accelerations/wdot-ft_sec2",
+    "accelerations/pdot-rad_sec2", "accelerations/qdot-rad_sec2", "accelerations/rdot-rad_sec2",
+)
+# residual weights: [udot, vdot, wdot] in ft/s^2, [pdot, qdot, rdot] x 100 (JSBSIM_NOTES 2.2)
+_ACC_W = np.array([1.0, 1.0, 1.0, 100.0, 100.0, 100.0])
+#: a trim is accepted when max |weighted acceleration| is below this
+TRIM_TOL = 0.05
+DHC6_BETA_RAD = -0.3 * RAD_PER_DEG
+
+
+@dataclass(frozen=True)
+class TrimResult:
+    """A trimmed operating point.
+
+    Attributes
+    ----------
+    op : OperatingPoint
+        What was asked for.
+    alpha_rad, beta_rad, phi_rad, theta_rad : float
+        Trimmed angles [rad].
+    vt_fps : float
+        True airspeed [ft/s].
+    vc_kts : float
+        Calibrated airspeed [kt].
+    elevator_cmd_norm, aileron_cmd_norm, rudder_cmd_norm, throttle_cmd_norm : float
+        Trimmed pilot commands [-] (the autopilot flies deviations about these).
+    pitch_trim_cmd_norm : float
+        Pitch-trim setting held during the run [-].
+    psidot_radps : float
+        Turn rate of a steady turn [rad/s] (0 when wings level).
+    residual : float
+        Max weighted body acceleration after the trim (ft/s^2; rad/s^2 x 100).
+    method : str
+        ``"jsbsim"`` or ``"running"``.
+    """
+
+    op: OperatingPoint
+    alpha_rad: float
+    beta_rad: float
+    phi_rad: float
+    theta_rad: float
+    vt_fps: float
+    vc_kts: float
+    elevator_cmd_norm: float
+    aileron_cmd_norm: float
+    rudder_cmd_norm: float
+    throttle_cmd_norm: float
+    pitch_trim_cmd_norm: float
+    psidot_radps: float
+    residual: float
+    method: str
+    extra: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def u0(self) -> NDArray[np.float64]:
+        """Trim commands [elevator, aileron, rudder, throttle] [-]."""
+        return np.array([self.elevator_cmd_norm, self.aileron_cmd_norm, self.rudder_cmd_norm, self.throttle_cmd_norm])
+
+
+def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
+    """Trim ``ac`` at ``op``; the aircraft is left at the trimmed state, time 0.
+
+    Raises
+    ------
+    TrimError
+        The point cannot be trimmed (reason says why: JSBSim's message, a control at its
+        limit, the residual reached).
+    """
+    if op.aircraft != ac.name:
+        raise TrimError(ac.name, op.label(), f"operating point is for {op.aircraft!r}")
+    fdm = ac.fdm
+    fdm["aero/alpha-min-rad"] = -0.25  # JSBSim searches alpha in [-5, 20] deg by default; flaps need less
+    fdm["aero/alpha-max-rad"] = 0.35
+    _set_ic(ac, op)
+    if ac.name == "f16":
+        fdm["gear/gear-cmd-norm"] = 0.0  # the FCS starts with the gear down (CDgear 0.027)
+        fdm["gear/gear-pos-norm"] = 0.0
+        fdm["fcs/fbw-override"] = 0.0
+    else:
+        fdm["fcs/flap-cmd-norm"] = op.flaps_deg / 40.0  # DHC-6 flap command: deg / 40
+    fdm["propulsion/set-running"] = -1  # start all engines (else no thrust after the trim)
+    fdm.set_trim_status(True)
+    fdm.run_ic()  # actuators (flaps, gear) jump to their commands while trim status is on
+    fdm.set_trim_status(False)
+    mode = 5 if (op.phi_deg and ac.name == "f16") else 1
+    jsb_error = ""
+    try:
+        with _quiet_stdout():  # JSBSim's trimmer prints its progress to C stdout
+            fdm["simulation/do_simple_trim"] = mode
+    except jsbsim.TrimFailureError as exc:
+        jsb_error = str(exc) or "JSBSim trim failed"
+    if ac.name == "f16":
+        if jsb_error:
+            raise TrimError(ac.name, op.label(), jsb_error)
+        fdm.get_propulsion().get_steady_state()
+        res = _residual_now(ac)
+        result = _result(ac, op, res, "jsbsim", psidot=_turn_rate(ac, op))
+    else:
+        fdm.get_propulsion().get_steady_state()  # avoid the N1 -> idle reset on the first step
+        result = trim_running(ac, op, jsb_error)
+    if not result.residual < TRIM_TOL:
+        raise TrimError(ac.name, op.label(), f"residual {result.residual:.3g} above {TRIM_TOL} ({jsb_error or 'no JSBSim message'})")
+    limit = _at_limit(result)
+    if limit:
+        raise TrimError(ac.name, op.label(), limit)
+    return result
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """Silence C-level stdout (file descriptor 1) for the duration."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError):  # no real fd 1 (e.g. captured in a notebook): leave it
+        yield
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+def _set_ic(ac: Aircraft, op: OperatingPoint) -> None:
+    fdm = ac.fdm
+    fdm["ic/h-sl-ft"] = op.h_ft
+    if op.vt_kts is not None:
+        fdm["ic/vt-kts"] = op.vt_kts
+    else:
+        fdm["ic/vc-kts"] = op.vc_kts
+    fdm["ic/gamma-deg"] = op.gamma_deg
+    fdm["ic/phi-deg"] = op.phi_deg
+    fdm["ic/psi-true-deg"] = op.psi_deg
+    fdm["ic/beta-deg"] = 0.0
+
+
+def _turn_rate(ac: Aircraft, op: OperatingPoint) -> float:
+    # coordinated turn: psidot = g tan(phi) / V  [rad/s]
+    return G0_FPS2 * math.tan(op.phi_deg * RAD_PER_DEG) / max(ac["velocities/vt-fps"], 1.0)
+
+
+def _residual_now(ac: Aircraft) -> float:
+    """Weighted accelerations of a tiny real step from the current state (no state change kept)."""
+    fdm = ac.fdm
+    dt0 = fdm.get_delta_t()
+    # evaluating at dt=0 misses the turboprop torque; a 1e-6 s real step includes it
+    fdm.set_dt(1e-6)
+    fdm.run()
+    fdm.set_dt(dt0)
+    acc = np.array([fdm[p] for p in _ACC]) * _ACC_W
+    return float(np.max(np.abs(acc)))
+
+
+# ---------------------------------------------------------------------- running-engine trim (DHC-6)
+def _init_state(ac: Aircraft, st: dict[str, float], z: NDArray[np.float64]) -> None:
+    fdm = ac.fdm
+    alpha, phi, thr, ptrim, ail, rud = z
+    fdm["ic/h-sl-ft"] = st["h_ft"]
+    fdm["ic/vt-fps"] = st["vt_fps"]
+    fdm["ic/psi-true-rad"] = st["psi_rad"]
+    fdm["ic/phi-rad"] = phi
+    fdm["ic/gamma-rad"] = st["gamma_rad"]
+    fdm["ic/alpha-rad"] = alpha
+    fdm["ic/beta-rad"] = st["beta_rad"]
+    psidot = st["psidot_radps"]
+    theta = fdm["ic/theta-rad"]
+    # steady coordinated turn: body rates from the Euler rate psidot
+    fdm["ic/p-rad_sec"] = -psidot * math.sin(theta)
+    fdm["ic/q-rad_sec"] = psidot * math.sin(phi) * math.cos(theta)
+    fdm["ic/r-rad_sec"] = psidot * math.cos(phi) * math.cos(theta)
+    for i in range(ac.n_engines):
+        fdm[f"fcs/throttle-cmd-norm[{i}]"] = thr
+    fdm["fcs/pitch-trim-cmd-norm"] = ptrim
+    fdm["fcs/elevator-cmd-norm"] = 0.0
+    fdm["fcs/aileron-cmd-norm"] = ail
+    fdm["fcs/rudder-cmd-norm"] = rud
+    fdm.set_trim_status(True)
+    fdm.run_ic()  # actuators jump to their commands
+    fdm.set_trim_status(False)
+    fdm.get_propulsion().get_steady_state()  # engine and propeller at steady state, phase tpRun
+
+
+def _running_residual(ac: Aircraft, st: dict[str, float], z: NDArray[np.float64]) -> NDArray[np.float64]:
+    _init_state(ac, st, z)
+    fdm = ac.fdm
+    dt0 = fdm.get_delta_t()
+    fdm.set_dt(1e-6)  # tiny REAL step: real engine torque, negligible integration
+    fdm.run()
+    fdm.set_dt(dt0)
+    return np.array([fdm[p] for p in _ACC]) * _ACC_W
+
+
+def trim_running(ac: Aircraft, op: OperatingPoint, jsb_error: str = "") -> TrimResult:
+    """Running-engine trim of the DHC-6 (JSBSIM_NOTES sec. 2.2): Newton with a central-difference Jacobian.
+
+    Starts from JSBSim's trim when it succeeded, else from a generic guess.
+    """
+    fdm = ac.fdm
+    vt_fps = fdm["velocities/vt-fps"] if op.vt_kts is None else op.speed_fps
+    if op.vt_kts is None:
+        fdm["ic/vc-kts"] = op.vc_kts  # convert calibrated to true at this altitude
+        vt_fps = fdm["ic/vt-fps"]
+    psidot = G0_FPS2 * math.tan(op.phi_deg * RAD_PER_DEG) / vt_fps
+    st = {
+        "h_ft": op.h_ft, "vt_fps": vt_fps, "psi_rad": op.psi_deg * RAD_PER_DEG,
+        "gamma_rad": op.gamma_deg * RAD_PER_DEG, "beta_rad": DHC6_BETA_RAD, "psidot_radps": psidot,
+    }
+    if jsb_error:
+        z = np.array([0.0, op.phi_deg * RAD_PER_DEG, 0.7, 0.2, 0.0, -0.08])
+    else:
+        z = np.array([
+            fdm["aero/alpha-rad"], op.phi_deg * RAD_PER_DEG, fdm["fcs/throttle-cmd-norm[0]"],
+            fdm["fcs/pitch-trim-cmd-norm"], fdm["fcs/aileron-cmd-norm"], fdm["fcs/rudder-cmd-norm"],
+        ])
+    h = np.array([1e-4, 1e-4, 1e-3, 1e-3, 1e-3, 1e-3])
+    lo = np.array([-0.25, -1.2, 0.0, -1.0, -1.0, -1.0])
+    hi = np.array([0.35, 1.2, 1.0, 1.0, 1.0, 1.0])
+    best = (np.inf, z.copy())
+    for _ in range(30):
+        r = _running_residual(ac, st, z)
+        nr = float(np.max(np.abs(r)))
+        if nr < best[0]:
+            best = (nr, z.copy())
+        if nr < 1e-4:
+            break
+        J = np.empty((6, 6))
+        for j in range(6):
+            dz = np.zeros(6)
+            dz[j] = h[j]
+            J[:, j] = (_running_residual(ac, st, z + dz) - _running_residual(ac, st, z - dz)) / (2 * h[j])
+        step, *_ = np.linalg.lstsq(J, -r, rcond=None)
+        # damped step: never move alpha/phi by more than 2 deg, controls by 0.1 per iteration
+        scale = min(1.0, float(np.min(np.array([0.035, 0.035, 0.1, 0.1, 0.1, 0.1]) / (np.abs(step) + 1e-12))))
+        z = np.clip(z + scale * step, lo, hi)
+    res, z = best
+    _init_state(ac, st, z)
+    return _result(ac, op, res, "running", psidot=psidot, z=z)
+
+
+def _result(ac: Aircraft, op: OperatingPoint, res: float, method: str, psidot: float,
+            z: NDArray[np.float64] | None = None) -> TrimResult:
+    fdm = ac.fdm
+    return TrimResult(
+        op=op,
+        alpha_rad=fdm["aero/alpha-rad"], beta_rad=fdm["aero/beta-rad"], phi_rad=fdm["attitude/phi-rad"],
+        theta_rad=fdm["attitude/theta-rad"], vt_fps=fdm["velocities/vt-fps"], vc_kts=fdm["velocities/vc-kts"],
+        elevator_cmd_norm=fdm["fcs/elevator-cmd-norm"], aileron_cmd_norm=fdm["fcs/aileron-cmd-norm"],
+        rudder_cmd_norm=fdm["fcs/rudder-cmd-norm"], throttle_cmd_norm=fdm["fcs/throttle-cmd-norm[0]"],
+        pitch_trim_cmd_norm=fdm["fcs/pitch-trim-cmd-norm"], psidot_radps=psidot, residual=res, method=method,
+    )
+
+
+def _at_limit(t: TrimResult) -> str:
+    limits = {
+        "throttle_cmd_norm": (0.0, 1.0), "pitch_trim_cmd_norm": (-1.0, 1.0),
+        "aileron_cmd_norm": (-1.0, 1.0), "rudder_cmd_norm": (-1.0, 1.0),
+    }
+    if t.op.aircraft == "f16":
+        limits["throttle_cmd_norm"] = (0.0, 0.5)  # above 0.5 is afterburner: not a cruise trim
+    for name, (lo, hi) in limits.items():
+        v = getattr(t, name)
+        if v <= lo + 1e-3 or v >= hi - 1e-3:
+            return f"{name} = {v:.3f} at its limit [{lo}, {hi}] (not enough control power or thrust)"
+    return ""
