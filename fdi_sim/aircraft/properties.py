@@ -20,6 +20,10 @@ _COMMON: dict[str, str] = {
     "v_body_fps": "velocities/v-fps",
     "w_body_fps": "velocities/w-fps",
     "hdot_fps": "velocities/h-dot-fps",
+    # inertial velocity in the local NED frame (ground speed components)
+    "v_north_fps": "velocities/v-north-fps",
+    "v_east_fps": "velocities/v-east-fps",
+    "v_down_fps": "velocities/v-down-fps",
     "gamma_rad": "flight-path/gamma-rad",
     # body rates relative to the Earth frame (what a strapdown gyro minus earth rate sees)
     "p_radps": "velocities/p-rad_sec",
@@ -73,7 +77,8 @@ _PER_AIRCRAFT: dict[str, dict[str, str]] = {
 TRUTH_SIGNALS: tuple[str, ...] = (
     "vt_fps", "vc_kts", "mach", "alpha_rad", "beta_rad", "p_radps", "q_radps", "r_radps",
     "phi_rad", "theta_rad", "psi_rad", "h_ft", "hdot_fps", "gamma_rad", "nx_g", "ny_g", "nz_g",
-    "u_body_fps", "v_body_fps", "w_body_fps", "qbar_psf", "lat_deg", "lon_deg",
+    "u_body_fps", "v_body_fps", "w_body_fps", "v_north_fps", "v_east_fps", "v_down_fps", "qbar_psf",
+    "lat_deg", "lon_deg",
     "turb_north_fps", "turb_east_fps", "turb_down_fps",
 )
 #: the pilot's commands, in the order logged on ``/commands/pilot``

@@ -1,0 +1,161 @@
+"""Sensor suite: truth -> measurement with bias, white noise, sample-and-hold and quantization.
+
+Every sensor measures one truth signal and keeps its name (``q_radps`` measures ``q_radps``).
+Model (``sampled-noisy-v1``), at each sample instant k of the sensor (rate ``rate_hz``, a divisor
+of the simulation rate), held between samples::
+
+    y_k = Q( x_k + b + v_k ),   b ~ N(bias, bias_std^2) drawn once per run,  v_k ~ N(0, noise_std^2)
+
+with ``Q`` rounding to ``quantum`` (none if 0). Noise is drawn in blocks of one simulated second
+from the suite's own ``numpy.random.Generator``, so a seed gives the same measurements bit for bit.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
+BLOCK_STEPS = 120
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """One sensor (all values in the units of the measured signal's name).
+
+    Attributes
+    ----------
+    name : str
+        Measured signal, e.g. ``"q_radps"``.
+    kind : str
+        What the instrument is (``"rate gyro"``), for documentation and plots.
+    noise_std : float
+        White-noise standard deviation per sample.
+    bias : float
+        Mean of the turn-on bias.
+    bias_std : float
+        Standard deviation of the turn-on bias drawn per run.
+    rate_hz : float
+        Sample rate [Hz]; must divide the simulation rate.
+    quantum : float
+        Resolution (0 for none).
+    """
+
+    name: str
+    kind: str
+    noise_std: float
+    bias: float = 0.0
+    bias_std: float = 0.0
+    rate_hz: float = 120.0
+    quantum: float = 0.0
+
+
+def load_suite(aircraft: str, suite: str = "default") -> tuple[SensorSpec, ...]:
+    """Read ``aircraft/<aircraft>/sensors.toml`` (``suite = "default"``) or ``sensors_<suite>.toml``."""
+    base = "DHC6" if aircraft.startswith("DHC6") else aircraft
+    fname = "sensors.toml" if suite == "default" else f"sensors_{suite}.toml"
+    path = AIRCRAFT_DATA / base / fname
+    if not path.exists():
+        raise FileNotFoundError(path)
+    data = tomllib.loads(path.read_text())
+    return tuple(SensorSpec(name=name, **vals) for name, vals in data["sensor"].items())
+
+
+def apply_overrides(specs: Sequence[SensorSpec], noise_scale: float = 1.0, biases: bool = True,
+                    overrides: dict[str, dict[str, float]] | None = None) -> tuple[SensorSpec, ...]:
+    """Scale all noise, drop biases, or replace single fields of named sensors."""
+    out = []
+    for s in specs:
+        s = replace(s, noise_std=s.noise_std * noise_scale)
+        if not biases:
+            s = replace(s, bias=0.0, bias_std=0.0)
+        if overrides and s.name in overrides:
+            s = replace(s, **overrides[s.name])
+        out.append(s)
+    return tuple(out)
+
+
+@dataclass(frozen=True, slots=True)
+class Measurement:
+    """The suite's output for one step: ``y`` in :attr:`SensorSuite.names` order."""
+
+    t_s: float
+    y: NDArray[np.float64]
+
+
+class SensorSuite:
+    """All sensors of one aircraft; ``reset(rng)`` then ``step(t_s, truth)`` each step.
+
+    Parameters
+    ----------
+    specs : sequence of SensorSpec
+    truth_names : sequence of str
+        Order of the truth vector passed to :meth:`step`.
+    dt_s : float
+        Simulation step [s].
+    """
+
+    def __init__(self, specs: Sequence[SensorSpec], truth_names: Sequence[str], dt_s: float) -> None:
+        self.specs = tuple(specs)
+        self.names = tuple(s.name for s in specs)
+        unknown = [n for n in self.names if n not in truth_names]
+        if unknown:
+            raise ValueError(f"sensors measure unknown signals {unknown}")
+        self.dt_s = dt_s
+        self._idx = np.array([list(truth_names).index(n) for n in self.names], dtype=np.intp)
+        sim_hz = 1.0 / dt_s
+        decim = []
+        for s in specs:
+            d = sim_hz / s.rate_hz
+            if s.rate_hz <= 0 or abs(d - round(d)) > 1e-6 or round(d) < 1:
+                raise ValueError(f"sensor {s.name}: rate {s.rate_hz} Hz does not divide the simulation rate {sim_hz:g} Hz")
+            decim.append(int(round(d)))
+        self._decim = np.array(decim)
+        period = math.lcm(*decim)
+        # which sensors sample at step k: _masks[k % period]
+        self._masks = [(k % self._decim) == 0 for k in range(period)]
+        self._all = [bool(m.all()) for m in self._masks]
+        self._period = period
+        self._noise_std = np.array([s.noise_std for s in specs])
+        self._quantum = np.array([s.quantum for s in specs])
+        self._quantized = self._quantum > 0
+        self._q_safe = np.where(self._quantized, self._quantum, 1.0)
+        self.reset(np.random.default_rng(0))
+
+    def reset(self, rng: np.random.Generator | None = None) -> None:
+        """Draw the turn-on biases and restart the noise stream from ``rng``."""
+        self._rng = rng if rng is not None else np.random.default_rng(0)
+        self.bias = np.array([s.bias + s.bias_std * self._rng.standard_normal() for s in self.specs])
+        self._y = np.zeros(len(self.specs))
+        self._block_start = -(10**9)
+        self._offset = np.zeros((BLOCK_STEPS, len(self.specs)))
+
+    def _fill_block(self, k0: int) -> None:
+        # bias + noise for the next block, drawn as one array (sampling instants only use their row)
+        self._offset = self.bias + self._noise_std * self._rng.standard_normal((BLOCK_STEPS, len(self.specs)))
+        self._block_start = k0
+
+    def step(self, t_s: float, truth: NDArray[np.float64]) -> Measurement:
+        """Measure the truth vector at time ``t_s`` [s]."""
+        k = int(round(t_s / self.dt_s))
+        j = k - self._block_start
+        if not 0 <= j < BLOCK_STEPS:
+            self._fill_block(k)
+            j = 0
+        new = truth[self._idx] + self._offset[j]
+        if self._quantized.any():
+            new = np.where(self._quantized, np.round(new / self._q_safe) * self._q_safe, new)
+        p = k % self._period
+        if self._all[p]:
+            self._y = new
+        else:
+            m = self._masks[p]
+            y = self._y.copy()
+            y[m] = new[m]
+            self._y = y
+        return Measurement(t_s, self._y)
