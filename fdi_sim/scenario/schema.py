@@ -1,0 +1,89 @@
+"""The scenario schema: TOML sections validated by pydantic v2 into frozen objects.
+
+Every key carries its unit in its name. Plugin sections (``[[maneuvers]]``, ``[[faults]]``,
+``[[detectors]]``) name a registered ``type`` id and are validated against that plugin's
+parameter model, so new faults and detectors slot in without touching this file.
+"""
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class InitialSection(_Section):
+    """Initial operating point (the trim point)."""
+
+    h_ft: float = Field(ge=500.0, le=50000.0, description="altitude above sea level [ft]")
+    vt_kts: float | None = Field(default=None, gt=50.0, le=900.0, description="true airspeed [kt]")
+    vc_kts: float | None = Field(default=None, gt=40.0, le=800.0, description="calibrated airspeed [kt]")
+    gamma_deg: float = Field(default=0.0, ge=-15.0, le=15.0, description="flight-path angle [deg]")
+    phi_deg: float = Field(default=0.0, ge=-60.0, le=60.0, description="bank angle of a steady turn [deg]")
+    psi_deg: float = Field(default=0.0, ge=0.0, lt=360.0, description="true heading [deg]")
+    flaps_deg: float = Field(default=0.0, ge=0.0, le=40.0, description="flap deflection [deg] (DHC-6)")
+
+    @model_validator(mode="after")
+    def _one_speed(self) -> "InitialSection":
+        if (self.vt_kts is None) == (self.vc_kts is None):
+            raise ValueError("give exactly one of vt_kts (true airspeed) and vc_kts (calibrated airspeed)")
+        return self
+
+
+class AtmosphereSection(_Section):
+    turbulence: Literal["none", "light", "moderate", "severe"] = "none"
+    wind_from_deg: float = Field(default=0.0, ge=0.0, le=360.0, description="steady wind direction (from) [deg]")
+    wind_speed_kts: float = Field(default=0.0, ge=0.0, le=100.0, description="steady wind speed [kt]")
+
+
+class AutopilotSection(_Section):
+    altitude: bool = True
+    airspeed: bool = True
+    lateral: bool = True
+
+
+class SensorOverride(_Section):
+    noise_std: float | None = Field(default=None, ge=0.0)
+    bias: float | None = None
+    bias_std: float | None = Field(default=None, ge=0.0)
+    rate_hz: float | None = Field(default=None, gt=0.0, le=1000.0)
+    quantum: float | None = Field(default=None, ge=0.0)
+
+
+class SensorsSection(_Section):
+    suite: str = "default"
+    noise_scale: float = Field(default=1.0, ge=0.0, le=100.0, description="multiplies every sensor's noise")
+    biases: bool = True
+    overrides: dict[str, SensorOverride] = Field(default_factory=dict)
+
+
+class LimitsSection(_Section):
+    """Where a run counts as diverged (departure)."""
+
+    alpha_min_deg: float = Field(default=-20.0, ge=-90.0, le=0.0)
+    alpha_max_deg: float = Field(default=30.0, ge=0.0, le=90.0)
+    phi_max_deg: float = Field(default=120.0, gt=0.0, le=180.0)
+    rate_max_radps: float = Field(default=4.0, gt=0.0, le=20.0)
+    vc_min_kts: float = Field(default=50.0, ge=0.0, le=500.0)
+
+
+class ScenarioModel(_Section):
+    """The whole scenario file."""
+
+    name: str = Field(min_length=1, max_length=120, pattern=r"^[A-Za-z0-9_.\-]+$")
+    description: str = ""
+    aircraft: Literal["f16", "DHC6"]
+    duration_s: float = Field(gt=0.0, le=360000.0, description="simulated time [s]")
+    seed: int = Field(default=0, ge=0, lt=2**63)
+    rate_hz: Literal[60, 120, 240] = 120
+    initial: InitialSection
+    atmosphere: AtmosphereSection = AtmosphereSection()
+    autopilot: AutopilotSection = AutopilotSection()
+    sensors: SensorsSection = SensorsSection()
+    limits: LimitsSection = LimitsSection()
+    maneuvers: tuple[dict[str, Any], ...] = ()
+    faults: tuple[dict[str, Any], ...] = ()
+    detectors: tuple[dict[str, Any], ...] = ()
