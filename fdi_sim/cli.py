@@ -1,0 +1,128 @@
+"""``fdi-sim``: run | scenarios | plugins | info | repair | linearize.
+
+Exit codes: 0 success, 1 a run that diverged or was interrupted, 2 bad input (one paragraph, no
+traceback).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tomllib
+from pathlib import Path
+from typing import Sequence
+
+from fdi_sim.errors import FdiSimError
+
+SCENARIO_DIR = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from fdi_sim.scenario import load
+    from fdi_sim.sim import run
+
+    sc = load(args.scenario)
+    changes = {}
+    if args.seed is not None:
+        changes["seed"] = args.seed
+    if args.duration is not None:
+        changes["duration_s"] = args.duration
+    if changes:
+        sc = sc.replace(**changes)
+    try:
+        res = run(sc, args.out, log_path=args.log, progress=None if not args.quiet else False)
+    except KeyboardInterrupt:
+        print("interrupted: the log was closed and is readable", file=sys.stderr)
+        return 1
+    print(res.summary.format())
+    print(f"log        {res.log_path}")
+    return 0 if res.status == "completed" else 1
+
+
+def _scenario_files() -> list[Path]:
+    return sorted(p for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    for p in _scenario_files():
+        try:
+            data = tomllib.loads(p.read_text())
+            desc = str(data.get("description", "")).strip().splitlines()[0] if data.get("description") else ""
+            ac = data.get("aircraft", "?")
+        except (tomllib.TOMLDecodeError, OSError) as exc:
+            desc, ac = f"(unreadable: {exc})", "?"
+        print(f"{p.relative_to(SCENARIO_DIR.parent)!s:48} {ac:5} {desc}")
+    return 0
+
+
+def _cmd_plugins(args: argparse.Namespace) -> int:
+    from fdi_sim import registry
+
+    kind = None
+    for spec in registry.all_plugins():
+        if spec.kind != kind:
+            kind = spec.kind
+            print(f"[{kind}]")
+        print(f"  {spec.id:26} {spec.summary}")
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from fdi_sim.flightlog import log_info
+
+    print(log_info(args.log).format())
+    return 0
+
+
+def _cmd_repair(args: argparse.Namespace) -> int:
+    from fdi_sim.flightlog import repair_log
+
+    rep = repair_log(args.log, args.out)
+    print(rep.format() if hasattr(rep, "format") else rep)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="fdi-sim", description="Aircraft fault detection and isolation testbed on JSBSim.")
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="fly a scenario file and write its MCAP log")
+    r.add_argument("scenario", help="scenario TOML file")
+    r.add_argument("--out", default="runs", help="output folder (default: runs)")
+    r.add_argument("--log", default=None, help="exact log file path (overrides --out)")
+    r.add_argument("--seed", type=int, default=None, help="override the scenario seed")
+    r.add_argument("--duration", type=float, default=None, help="override duration_s [s]")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=_cmd_run)
+    s = sub.add_parser("scenarios", help="list the shipped scenarios")
+    s.set_defaults(func=_cmd_scenarios)
+    pl = sub.add_parser("plugins", help="list every registered plugin by id")
+    pl.set_defaults(func=_cmd_plugins)
+    i = sub.add_parser("info", help="summarize an MCAP log")
+    i.add_argument("log")
+    i.set_defaults(func=_cmd_info)
+    rp = sub.add_parser("repair", help="rebuild a log cut off by a crash")
+    rp.add_argument("log")
+    rp.add_argument("--out", default=None, help="repaired file (default: <stem>.repaired.mcap)")
+    rp.set_defaults(func=_cmd_repair)
+    try:
+        from fdi_sim.linear import cli as linear_cli
+    except ImportError:
+        linear_cli = None
+    if linear_cli is not None and hasattr(linear_cli, "add_parser"):
+        linear_cli.add_parser(sub)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except FdiSimError as exc:
+        print(f"fdi-sim {args.command}: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

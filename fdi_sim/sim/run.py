@@ -1,0 +1,313 @@
+"""The simulation loop: the one module that wires the stages together.
+
+Per step (dt = 1/rate_hz), at time t:
+  truth x(t) -> sensors -> y(t) -> pilot (autopilot + maneuvers) -> commands u(t) -> JSBSim step
+and everything is logged with time stamp t. A run ends ``completed``, ``diverged`` (NaN, ground
+impact, departure beyond the scenario's limits), ``interrupted`` (Ctrl-C) or ``error``; the MCAP
+log is closed in ``finally`` in every case, so it is always readable.
+"""
+from __future__ import annotations
+
+import importlib.metadata
+import math
+import platform
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fdi_sim import registry
+from fdi_sim.aircraft import COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, trim
+from fdi_sim.errors import LogError, SimulationDiverged
+from fdi_sim.flightlog import FlightLogWriter
+from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimPoint
+from fdi_sim.scenario import Scenario
+from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
+from fdi_sim.units import DEG_PER_RAD, RAD_PER_DEG
+
+#: topic names (DESIGN.md: topics by stage)
+TOPIC_TRUTH = "/truth/state"
+TOPIC_SURFACES = "/truth/surfaces"
+TOPIC_OP = "/truth/operating_point"
+TOPIC_COMMANDS = "/commands/pilot"
+TOPIC_SENSORS = "/sensors/measurements"
+TOPIC_STATUS = "/sim/status"
+OP_SIGNALS = ("h_ft", "vc_kts", "mach", "alpha_rad", "flaps_deg", "icing_eta")
+PILOT_FIELDS = COMMAND_SIGNALS + ("h_ref_ft", "vc_ref_kts", "psi_ref_rad", "phi_ref_rad")
+
+_STATUS_SCHEMA = {
+    "type": "object",
+    "properties": {
+        "event": {"type": "string"}, "status": {"type": "string"}, "reason": {"type": "string"},
+        "t_s": {"type": "number"},
+    },
+}
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What a run did, for the terminal and for tests.
+
+    Attributes
+    ----------
+    scenario, aircraft : str
+    seed : int
+    status : str
+        ``completed``, ``diverged``, ``interrupted`` or ``error``.
+    reason : str
+        Why a run ended early ("" when completed).
+    t_end_s : float
+        Last simulated time logged [s].
+    steps : int
+    wall_s : float
+        Wall-clock time of the loop [s].
+    max_abs_dh_ft, max_abs_dvc_kts, max_abs_dphi_deg : float
+        Largest deviation of truth from the pilot's references (altitude; calibrated airspeed
+        relative to the steady air mass, i.e. gust removed; bank angle).
+    trim_throttle_norm, trim_alpha_deg : float
+    """
+
+    scenario: str
+    aircraft: str
+    seed: int
+    status: str
+    reason: str
+    t_end_s: float
+    steps: int
+    wall_s: float
+    max_abs_dh_ft: float
+    max_abs_dvc_kts: float
+    max_abs_dphi_deg: float
+    trim_throttle_norm: float
+    trim_alpha_deg: float
+
+    @property
+    def realtime_factor(self) -> float:
+        return self.t_end_s / self.wall_s if self.wall_s > 0 else math.inf
+
+    def format(self) -> str:
+        lines = [
+            f"scenario   {self.scenario} ({self.aircraft}, seed {self.seed})",
+            f"status     {self.status}" + (f": {self.reason}" if self.reason else ""),
+            f"flown      {self.t_end_s:.2f} s simulated in {self.wall_s:.2f} s ({self.realtime_factor:.0f}x real time, {self.steps} steps)",
+            f"trim       throttle {self.trim_throttle_norm:.3f}, alpha {self.trim_alpha_deg:.2f} deg",
+            f"holds      max |dh| {self.max_abs_dh_ft:.1f} ft, max |dVc| {self.max_abs_dvc_kts:.2f} kt (gust removed), "
+            f"max |dphi| {self.max_abs_dphi_deg:.2f} deg",
+        ]
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """The outcome of :func:`run`: where the log is, how the run ended, and its summary."""
+
+    log_path: Path
+    status: str
+    summary: RunSummary
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in ("fdi-sim", "jsbsim", "numpy", "scipy", "mcap", "pydantic"):
+        try:
+            out[pkg] = importlib.metadata.version(pkg)
+        except importlib.metadata.PackageNotFoundError:
+            out[pkg] = "unknown"
+    return out
+
+
+def _default_log_path(sc: Scenario, out_dir: Path) -> Path:
+    return out_dir / f"{sc.name}_seed{sc.seed}.mcap"
+
+
+def build_pilot(sc: Scenario, tr: Any, measurement_names: tuple[str, ...]) -> Pilot:
+    maneuvers = [registry.get("maneuver", tid).factory(p) for tid, p in sc.maneuvers]
+    tp = TrimPoint(
+        tr.elevator_cmd_norm, tr.aileron_cmd_norm, tr.rudder_cmd_norm, tr.throttle_cmd_norm, tr.theta_rad,
+        tr.phi_rad, sc.model.initial.psi_deg * RAD_PER_DEG, sc.model.initial.h_ft, tr.vc_kts,
+    )
+    ap = sc.model.autopilot
+    return Pilot(AutopilotGains.for_aircraft(sc.aircraft), AutopilotModes(ap.altitude, ap.airspeed, ap.lateral), tp,
+                 maneuvers, measurement_names, sc.dt_s)
+
+
+def build_sensors(sc: Scenario, dt_s: float) -> SensorSuite:
+    s = sc.model.sensors
+    overrides = {k: v.model_dump(exclude_none=True) for k, v in s.overrides.items()}
+    specs = load_suite(sc.aircraft, s.suite)
+    unknown = [k for k in overrides if k not in {sp.name for sp in specs}]
+    if unknown:
+        from fdi_sim.errors import ScenarioError
+
+        raise ScenarioError(sc.source, f"sensors.overrides.{unknown[0]}", "no such sensor in the suite",
+                            f"sensors are: {', '.join(sp.name for sp in specs)}")
+    return SensorSuite(apply_overrides(specs, s.noise_scale, s.biases, overrides), TRUTH_SIGNALS, dt_s)
+
+
+def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | None = None,
+        progress: bool | None = None) -> RunResult:
+    """Fly a scenario and write its MCAP log.
+
+    Parameters
+    ----------
+    sc : Scenario
+    out_dir : path
+        Folder of the log (created); ignored when ``log_path`` is given.
+    log_path : path, optional
+        Exact log file path.
+    progress : bool, optional
+        Show a progress bar with the simulated-time rate; default: on for runs longer than 30 s
+        of simulated time when stderr is a terminal.
+
+    Returns
+    -------
+    RunResult
+    """
+    out = Path(log_path) if log_path is not None else _default_log_path(sc, Path(out_dir))
+    seeds = np.random.SeedSequence(sc.seed)
+    ss_sensors, ss_pilot, ss_jsbsim, _ss_faults, _ss_fdi = seeds.spawn(5)
+    jsbsim_seed = int(ss_jsbsim.generate_state(1)[0] % (2**31 - 1))
+    metadata = {
+        "scenario": {"name": sc.name, "seed": str(sc.seed), "source": sc.source, "text": sc.text, "json": sc.to_json(),
+                     "aircraft": sc.aircraft, "rate_hz": str(sc.model.rate_hz)},
+        "versions": _versions(),
+    }
+    # open the log first: an unwritable folder fails before any simulation
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise LogError(str(out.parent), f"cannot create the output folder ({exc.strerror})") from None
+    writer = FlightLogWriter(out, metadata=metadata, flush_period_s=1.0)
+    status, reason = "error", ""
+    t_s, k = 0.0, 0
+    stats = np.zeros(3)
+    tr = None
+    wall0 = time.perf_counter()
+    try:
+        ac = Aircraft(sc.aircraft, sc.dt_s)
+        ac.set_atmosphere(Atmosphere(), jsbsim_seed)
+        tr = trim(ac, sc.operating_point())
+        m = sc.model
+        ac.set_atmosphere(Atmosphere(m.atmosphere.turbulence, m.atmosphere.wind_from_deg, m.atmosphere.wind_speed_kts), jsbsim_seed)
+        sensors = build_sensors(sc, sc.dt_s)
+        sensors.reset(np.random.default_rng(ss_sensors))
+        pilot = build_pilot(sc, tr, sensors.names)
+        pilot.reset(np.random.default_rng(ss_pilot))
+        ch_truth = writer.add_vector_channel(TOPIC_TRUTH, "fdi_sim/msg/TruthState", ("t_s",) + TRUTH_SIGNALS)
+        ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
+        ch_op = writer.add_vector_channel(TOPIC_OP, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
+        ch_cmd = writer.add_vector_channel(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
+        ch_meas = writer.add_vector_channel(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
+        ch_status = writer.add_event_channel(TOPIC_STATUS, "fdi_sim/msg/SimStatus", _STATUS_SCHEMA)
+        ch_status.write(0.0, {"event": "start", "status": "running", "reason": tr.method + " trim", "t_s": 0.0})
+        status, reason, t_s, k, stats = _loop(sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress)
+        ch_status.write(t_s, {"event": "end", "status": status, "reason": reason, "t_s": t_s})
+    except KeyboardInterrupt:
+        status, reason = "interrupted", "stopped by the user (Ctrl-C)"
+        raise
+    finally:
+        writer.close()
+    wall = time.perf_counter() - wall0
+    summary = RunSummary(
+        scenario=sc.name, aircraft=sc.aircraft, seed=sc.seed, status=status, reason=reason, t_end_s=t_s, steps=k,
+        wall_s=wall, max_abs_dh_ft=float(stats[0]), max_abs_dvc_kts=float(stats[1]), max_abs_dphi_deg=float(stats[2]),
+        trim_throttle_norm=tr.throttle_cmd_norm if tr else math.nan,
+        trim_alpha_deg=tr.alpha_rad * DEG_PER_RAD if tr else math.nan,
+    )
+    return RunResult(log_path=out, status=status, summary=summary)
+
+
+def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channels: tuple, progress: bool | None):
+    """The per-step loop; returns (status, reason, last t_s, steps, max deviations)."""
+    ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
+    read_truth = ac.reader(TRUTH_SIGNALS)
+    read_surf = ac.reader(SURFACE_SIGNALS)
+    write_cmd = ac.command_writer()
+    idx = {n: TRUTH_SIGNALS.index(n) for n in TRUTH_SIGNALS}
+    i_h, i_vc, i_vt, i_phi, i_alpha, i_mach = idx["h_ft"], idx["vc_kts"], idx["vt_fps"], idx["phi_rad"], idx["alpha_rad"], idx["mach"]
+    i_vn, i_ve, i_vd = idx["v_north_fps"], idx["v_east_fps"], idx["v_down_fps"]
+    i_p, i_q, i_r = idx["p_radps"], idx["q_radps"], idx["r_radps"]
+    lim = sc.model.limits
+    a_lo, a_hi = lim.alpha_min_deg * RAD_PER_DEG, lim.alpha_max_deg * RAD_PER_DEG
+    phi_max, rate_max, vc_min = lim.phi_max_deg * RAD_PER_DEG, lim.rate_max_radps, lim.vc_min_kts
+    atm = sc.model.atmosphere
+    to = math.radians(atm.wind_from_deg + 180.0)
+    from fdi_sim.units import FPS_PER_KT
+    wn, we = atm.wind_speed_kts * FPS_PER_KT * math.cos(to), atm.wind_speed_kts * FPS_PER_KT * math.sin(to)
+    flaps_deg = sc.model.initial.flaps_deg
+    dt = sc.dt_s
+    n_steps = int(round(sc.duration_s / dt))
+    h_agl_node = ac.node("position/h-agl-ft").get_double_value
+    max_dh = max_dv = max_dphi = 0.0
+    bar = _progress_bar(sc, progress)
+    status, reason = "completed", ""
+    k = 0
+    t_s = 0.0
+    last_shown = 0
+    try:
+        for k in range(n_steps + 1):
+            t_s = k * dt
+            x = read_truth()
+            # --- divergence checks on the truth (NaN, ground, departure) -------------------------
+            if not np.isfinite(x).all():
+                bad = [TRUTH_SIGNALS[i] for i in np.flatnonzero(~np.isfinite(x))[:3]]
+                raise SimulationDiverged(t_s, f"non-finite state ({', '.join(bad)})")
+            if h_agl_node() <= 0.0:
+                raise SimulationDiverged(t_s, "ground impact")
+            if not (a_lo <= x[i_alpha] <= a_hi):
+                raise SimulationDiverged(t_s, f"alpha {x[i_alpha] * DEG_PER_RAD:.1f} deg outside [{lim.alpha_min_deg}, {lim.alpha_max_deg}]")
+            if abs(x[i_phi]) > phi_max:
+                raise SimulationDiverged(t_s, f"bank {x[i_phi] * DEG_PER_RAD:.1f} deg beyond {lim.phi_max_deg}")
+            if max(abs(x[i_p]), abs(x[i_q]), abs(x[i_r])) > rate_max:
+                raise SimulationDiverged(t_s, f"body rate beyond {rate_max} rad/s")
+            if x[i_vc] < vc_min:
+                raise SimulationDiverged(t_s, f"airspeed {x[i_vc]:.1f} kt below {vc_min}")
+            meas = sensors.step(t_s, x)
+            cmd = pilot.step(t_s, meas.y)
+            write_cmd(cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm)
+            # --- statistics: deviation from the references (airspeed relative to the steady air) --
+            v_air = math.sqrt((x[i_vn] - wn) ** 2 + (x[i_ve] - we) ** 2 + x[i_vd] ** 2)
+            dv = abs(x[i_vc] * v_air / x[i_vt] - cmd.vc_ref_kts)
+            dh = abs(x[i_h] - cmd.h_ref_ft)
+            dphi = abs(x[i_phi] - cmd.phi_ref_rad) * DEG_PER_RAD
+            if dh > max_dh:
+                max_dh = dh
+            if dv > max_dv:
+                max_dv = dv
+            if dphi > max_dphi:
+                max_dphi = dphi
+            # --- log ------------------------------------------------------------------------
+            ch_truth.write(t_s, x)
+            ch_meas.write(t_s, meas.y)
+            ch_cmd.write(t_s, (cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm,
+                               cmd.h_ref_ft, cmd.vc_ref_kts, cmd.psi_ref_rad, cmd.phi_ref_rad))
+            ch_op.write(t_s, (x[i_h], x[i_vc], x[i_mach], x[i_alpha], flaps_deg, 0.0))
+            if k == n_steps:
+                break
+            if not ac.step():
+                raise SimulationDiverged(t_s, "JSBSim stopped the run")
+            ch_surf.write(t_s, read_surf())
+            if bar is not None and k - last_shown >= 120:
+                bar.update((k - last_shown) * dt)
+                last_shown = k
+    except SimulationDiverged as exc:
+        status, reason, t_s = "diverged", exc.reason, exc.t_s
+    finally:
+        if bar is not None:
+            bar.close()
+    return status, reason, t_s, k, np.array([max_dh, max_dv, max_dphi])
+
+
+def _progress_bar(sc: Scenario, progress: bool | None):
+    import sys
+
+    if progress is None:
+        progress = sc.duration_s > 30 and sys.stderr.isatty()
+    if not progress:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=sc.duration_s, unit="sim s", desc=sc.name, leave=False, dynamic_ncols=True,
+                bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}, {rate_fmt}]")
