@@ -1,0 +1,59 @@
+"""The flight log: one MCAP file per run, written, read back, and repaired after a crash.
+
+Table of contents
+-----------------
+- :class:`FlightLogWriter` (``writer.py``): ``add_vector_channel`` -> :class:`VectorChannel`
+  (float64 rows, CDR + ``ros2msg``), ``add_event_channel`` -> :class:`EventChannel` (JSON +
+  JSON Schema), ``add_metadata``, ``flush``, ``close``; flushed once per simulated second.
+- :func:`read_log` -> :class:`FlightLog` (``reader.py``): ``topics[topic]`` is a
+  :class:`VectorTopic` (numpy column per field), an :class:`EventTopic` (``(t_s, dict)`` events)
+  or a :class:`RawTopic`; :func:`log_info` -> :class:`LogInfo` from the summary alone.
+- :func:`repair_log` -> :class:`RepairReport` (``repair.py``): rebuild a file cut off by a crash.
+- ``schemas.py``: topic names, schema validation, CDR layout, standard event JSON Schemas.
+
+MCAP libraries are imported only inside this package (STYLE.md rule 2).
+"""
+from __future__ import annotations
+
+from fdi_sim.flightlog.reader import (
+    Event,
+    EventTopic,
+    FlightLog,
+    LogInfo,
+    RawTopic,
+    TopicData,
+    TopicInfo,
+    VectorTopic,
+    log_info,
+    read_log,
+)
+from fdi_sim.flightlog.repair import RepairReport, repair_log
+from fdi_sim.flightlog.schemas import (
+    ALARM_JSON_SCHEMA,
+    FAILURE_LOG_JSON_SCHEMA,
+    METADATA_SCENARIO,
+    STATUS_JSON_SCHEMA,
+    TOPIC_COMMANDS,
+    TOPIC_FAULTS,
+    TOPIC_FDI_ALARMS,
+    TOPIC_FDI_FAILURE_LOG,
+    TOPIC_SENSORS,
+    TOPIC_SIM_STATUS,
+    TOPIC_SURFACES,
+    TOPIC_TRUTH_STATE,
+    EventSchema,
+    VectorSchema,
+    event_schema,
+    fdi_topic,
+    vector_schema,
+)
+from fdi_sim.flightlog.writer import EventChannel, FlightLogWriter, VectorChannel
+
+__all__ = [
+    "ALARM_JSON_SCHEMA", "FAILURE_LOG_JSON_SCHEMA", "METADATA_SCENARIO", "STATUS_JSON_SCHEMA",
+    "TOPIC_COMMANDS", "TOPIC_FAULTS", "TOPIC_FDI_ALARMS", "TOPIC_FDI_FAILURE_LOG", "TOPIC_SENSORS",
+    "TOPIC_SIM_STATUS", "TOPIC_SURFACES", "TOPIC_TRUTH_STATE",
+    "Event", "EventChannel", "EventSchema", "EventTopic", "FlightLog", "FlightLogWriter", "LogInfo",
+    "RawTopic", "RepairReport", "TopicData", "TopicInfo", "VectorChannel", "VectorSchema", "VectorTopic",
+    "event_schema", "fdi_topic", "log_info", "read_log", "repair_log", "vector_schema",
+]

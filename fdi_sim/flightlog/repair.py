@@ -1,0 +1,259 @@
+"""Rebuild a flight log cut off by a crash (``fdi-sim repair LOG``).
+
+A run killed before :meth:`FlightLogWriter.close` leaves an MCAP file without Data End,
+summary and footer, possibly ending inside a chunk. Everything the writer flushed before the
+crash is a sequence of complete records (MCAP spec, "Records": opcode, uint64 length, body),
+so the file is read from the start record by record; the scan stops at the first record cut
+short. Every complete Schema, Channel and Metadata record is kept, every complete Chunk whose
+size and CRC check out gives its messages back, and a new file with message indexes, summary
+and footer is written with the same low-level writer as a normal run.
+"""
+from __future__ import annotations
+
+import io
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fdi_sim.errors import LogError
+from fdi_sim.flightlog.reader import parse_chunk, scan_records
+from fdi_sim.flightlog.writer import MCAP_MAGIC, McapFileWriter, RawMessage, build_chunk
+from fdi_sim.units import NS_PER_S
+
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
+_OP_CHUNK, _OP_METADATA, _OP_DATA_END = 0x06, 0x0C, 0x0F
+#: records that only index or summarize: rebuilt, never copied
+_OP_DERIVED = frozenset({0x07, 0x08, 0x0A, 0x0B, 0x0D, 0x0E})
+_OP_ATTACHMENT = 0x09
+#: messages per chunk when a file held messages outside chunks
+_LOOSE_CHUNK_MESSAGES = 4096
+
+
+@dataclass(frozen=True)
+class RepairReport:
+    """What :func:`repair_log` recovered.
+
+    Attributes
+    ----------
+    src, dst : Path
+    messages_recovered : int
+    first_t_s, last_t_s : float or None
+        Earliest and latest recovered message time [s]; None if no message was recovered.
+    message_counts : dict of str to int
+        Recovered messages per topic.
+    chunks_recovered, chunks_dropped : int
+        Complete chunks used / complete chunks rejected (bad size or CRC).
+    bytes_total, bytes_used : int
+        File size and the end of the last complete record [bytes].
+    had_footer : bool
+        The source was already complete (repair then simply rewrites it).
+    metadata_names : tuple of str
+    records_skipped : int
+        Complete records that could not be used (attachments, corrupted or unknown records,
+        messages of unknown channels).
+    """
+
+    src: Path
+    dst: Path
+    messages_recovered: int
+    first_t_s: float | None
+    last_t_s: float | None
+    message_counts: dict[str, int] = field(default_factory=dict)
+    chunks_recovered: int = 0
+    chunks_dropped: int = 0
+    bytes_total: int = 0
+    bytes_used: int = 0
+    had_footer: bool = False
+    metadata_names: tuple[str, ...] = ()
+    records_skipped: int = 0
+
+    def format(self) -> str:
+        """A terminal summary (what ``fdi-sim repair LOG`` prints)."""
+        span = ("no messages" if self.last_t_s is None
+                else f"t = {self.first_t_s:.3f} .. {self.last_t_s:.3f} s")
+        lines = [
+            f"repaired {self.src} -> {self.dst}",
+            f"{'source was complete' if self.had_footer else 'source was cut off'}: used "
+            f"{self.bytes_used} of {self.bytes_total} bytes",
+            f"recovered {self.messages_recovered} messages ({span}) from {self.chunks_recovered} chunks"
+            + (f"; dropped {self.chunks_dropped} damaged chunks" if self.chunks_dropped else "")
+            + (f"; skipped {self.records_skipped} records" if self.records_skipped else ""),
+        ]
+        lines += [f"  {topic}: {n}" for topic, n in self.message_counts.items()]
+        lines.append("metadata: " + (", ".join(self.metadata_names) if self.metadata_names else "(none)"))
+        return "\n".join(lines)
+
+
+@dataclass
+class _Recovered:
+    schemas: dict[int, tuple[str, str, bytes]] = field(default_factory=dict)
+    channels: dict[int, tuple[int, str, str, dict[str, str]]] = field(default_factory=dict)
+    metadata: list[tuple[str, dict[str, str]]] = field(default_factory=list)
+    chunks: list[list[RawMessage]] = field(default_factory=list)
+    chunks_dropped: int = 0
+    skipped: int = 0
+    had_footer: bool = False
+    bytes_used: int = len(MCAP_MAGIC)
+
+
+def repair_log(src: str | Path, dst: str | Path | None = None, *, compression: str | None = "zstd") -> RepairReport:
+    """Rebuild a cut-off (or complete) flight log into a proper MCAP file.
+
+    Parameters
+    ----------
+    src : str or Path
+        The damaged log.
+    dst : str or Path, optional
+        Output; default ``<stem>.repaired.mcap`` next to ``src``.
+    compression : {"zstd", "lz4", None}
+        Chunk compression of the output.
+
+    Returns
+    -------
+    RepairReport
+
+    Raises
+    ------
+    LogError
+        ``src`` unreadable, not MCAP, holding nothing recoverable, or ``dst`` unwritable.
+    """
+    src_p = Path(src)
+    dst_p = Path(dst) if dst is not None else src_p.with_name(src_p.stem + ".repaired.mcap")
+    try:
+        data = src_p.read_bytes()
+    except OSError as exc:
+        raise LogError(str(src), f"cannot read the flight log ({exc.strerror})") from None
+    if dst_p.resolve() == src_p.resolve():
+        raise LogError(str(src), "repair would overwrite its own input; give another destination")
+    if data[:len(MCAP_MAGIC)] != MCAP_MAGIC:
+        if len(data) < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(data):
+            raise LogError(str(src), "the file was cut off inside the MCAP magic: nothing to recover")
+        raise LogError(str(src), "not an MCAP file (it does not start with the MCAP magic bytes)")
+    rec = _scan(data)
+    if not rec.channels and not rec.metadata:
+        raise LogError(str(src), f"nothing to recover: no complete channel or metadata record in the "
+                       f"first {rec.bytes_used} of {len(data)} bytes")
+    return _write(src_p, dst_p, data, rec, compression)
+
+
+def _scan(data: bytes) -> _Recovered:
+    """Collect every usable complete record of the data section."""
+    from mcap.data_stream import ReadDataStream
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Metadata, Schema
+
+    def stream(body: memoryview) -> ReadDataStream:
+        return ReadDataStream(io.BytesIO(bytes(body)))
+
+    rec = _Recovered()
+    view = memoryview(data)
+    loose: list[RawMessage] = []
+    for opcode, start, length in scan_records(view, len(MCAP_MAGIC)):
+        body = view[start:start + length]
+        rec.bytes_used = start + length
+        try:
+            if opcode in (_OP_DATA_END, _OP_FOOTER):
+                rec.had_footer = _has_footer(data)
+                break
+            if opcode == _OP_SCHEMA:
+                s = Schema.read(stream(body))
+                rec.schemas.setdefault(s.id, (s.name, s.encoding, bytes(s.data)))
+            elif opcode == _OP_CHANNEL:
+                c = Channel.read(stream(body))
+                rec.channels.setdefault(c.id, (c.schema_id, c.topic, c.message_encoding, dict(c.metadata)))
+            elif opcode == _OP_METADATA:
+                m = Metadata.read(stream(body))
+                rec.metadata.append((m.name, dict(m.metadata)))
+            elif opcode == _OP_MESSAGE:
+                msg = Message.read(stream(body), length)
+                loose.append(RawMessage(msg.channel_id, msg.sequence, msg.log_time, bytes(msg.data)))
+            elif opcode == _OP_CHUNK:
+                try:
+                    rec.chunks.append(_chunk_messages(parse_chunk(body).records, rec, stream))
+                except (ValueError, struct.error, McapError, UnicodeDecodeError):
+                    rec.chunks_dropped += 1
+            elif opcode == _OP_HEADER or opcode in _OP_DERIVED:
+                pass
+            else:  # attachments and unknown records are not carried over
+                rec.skipped += 1
+        except (ValueError, struct.error, McapError, UnicodeDecodeError):
+            rec.skipped += 1
+    for i in range(0, len(loose), _LOOSE_CHUNK_MESSAGES):
+        rec.chunks.append(loose[i:i + _LOOSE_CHUNK_MESSAGES])
+    return rec
+
+
+def _chunk_messages(records: bytes, rec: _Recovered, stream: object) -> list[RawMessage]:
+    """Messages (and schemas/channels) inside one decompressed chunk; raise if malformed."""
+    from mcap.records import Channel, Schema
+
+    out: list[RawMessage] = []
+    end = 0
+    view = memoryview(records)
+    for opcode, start, length in scan_records(view):
+        end = start + length
+        if opcode == _OP_MESSAGE:
+            if length < 22:
+                raise ValueError("message record too short")
+            cid, seq, log_ns = struct.unpack_from("<HIQ", records, start)
+            out.append(RawMessage(cid, seq, log_ns, records[start + 22:end]))
+        elif opcode == _OP_SCHEMA:
+            s = Schema.read(stream(view[start:end]))  # type: ignore[operator]
+            rec.schemas.setdefault(s.id, (s.name, s.encoding, bytes(s.data)))
+        elif opcode == _OP_CHANNEL:
+            c = Channel.read(stream(view[start:end]))  # type: ignore[operator]
+            rec.channels.setdefault(c.id, (c.schema_id, c.topic, c.message_encoding, dict(c.metadata)))
+    if end != len(records):
+        raise ValueError("chunk records do not fill the chunk")
+    return out
+
+
+def _has_footer(data: bytes) -> bool:
+    tail = len(MCAP_MAGIC) + 29
+    return len(data) >= tail + len(MCAP_MAGIC) and data.endswith(MCAP_MAGIC) and data[-tail] == _OP_FOOTER
+
+
+def _write(src: Path, dst: Path, data: bytes, rec: _Recovered, compression: str | None) -> RepairReport:
+    """Write the recovered records as a complete MCAP file."""
+    usable = {cid: ch for cid, ch in rec.channels.items() if ch[0] == 0 or ch[0] in rec.schemas}
+    out = McapFileWriter(dst, compression)
+    counts: dict[str, int] = {}
+    n_total, first_ns, last_ns, skipped = 0, None, None, rec.skipped
+    try:
+        for sid in sorted({ch[0] for ch in usable.values() if ch[0] != 0}):
+            out.add_schema(sid, *rec.schemas[sid])
+        for cid, (sid, topic, encoding, meta) in sorted(usable.items()):
+            out.add_channel(cid, sid, topic, encoding, meta)
+            counts[topic] = 0
+        for name, meta in rec.metadata:
+            out.add_metadata(name, meta)
+        for msgs in rec.chunks:
+            keep = [m for m in msgs if m.channel_id in usable]
+            skipped += len(msgs) - len(keep)
+            if not keep:
+                continue
+            out.write_chunk(build_chunk([], keep))
+            for m in keep:
+                counts[usable[m.channel_id][1]] += 1
+            lo = min(m.log_time_ns for m in keep)
+            hi = max(m.log_time_ns for m in keep)
+            first_ns = lo if first_ns is None else min(first_ns, lo)
+            last_ns = hi if last_ns is None else max(last_ns, hi)
+            n_total += len(keep)
+        out.finish()
+    except OSError as exc:
+        out.abort()
+        raise LogError(str(dst), f"cannot write the repaired log ({exc})") from None
+    return RepairReport(
+        src=src, dst=dst, messages_recovered=n_total,
+        first_t_s=None if first_ns is None else first_ns / NS_PER_S,
+        last_t_s=None if last_ns is None else last_ns / NS_PER_S,
+        message_counts=counts,
+        chunks_recovered=sum(1 for c in rec.chunks if c),
+        chunks_dropped=rec.chunks_dropped, bytes_total=len(data), bytes_used=rec.bytes_used,
+        had_footer=rec.had_footer, metadata_names=tuple(name for name, _ in rec.metadata),
+        records_skipped=skipped,
+    )
+
+
+__all__ = ["RepairReport", "repair_log"]

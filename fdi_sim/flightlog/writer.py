@@ -1,0 +1,797 @@
+"""Write the flight log: one MCAP file per run, flushed about once per simulated second.
+
+Design (measured, see ``tests/benchmarks/bench_flightlog.py``): the simulation loop calls
+:meth:`VectorChannel.write` ~6 times per 1/120 s step, so a write only validates and appends
+the row's bytes to a Python list (~0.5 us). Once per ``flush_period_s`` of *simulated* time the
+buffered rows of all channels become one MCAP chunk built with numpy in one shot: a packed
+structured array per channel whose rows are complete Message records (opcode, length, channel,
+sequence, log time, publish time, CDR header, float64 fields), interleaved in time order, then
+compressed, followed by one Message Index record per channel, then ``file.flush()``. A process
+killed with SIGKILL therefore loses at most one flush period; :func:`fdi_sim.flightlog.repair_log`
+rebuilds the summary of such a file. ``close()`` writes the summary (schemas, channels,
+statistics, chunk and metadata indexes) and the footer (MCAP spec, "Summary Section").
+
+The records follow the MCAP specification (https://mcap.dev/spec): a Message record is
+``opcode 0x05 | uint64 length | uint16 channel_id | uint32 sequence | uint64 log_time |
+uint64 publish_time | data``; a Message Index record is ``opcode 0x07 | uint64 length |
+uint16 channel_id | uint32 byte length of the entries | (uint64 log_time, uint64 offset)...``
+with offsets counted from the start of the chunk's uncompressed records.
+"""
+from __future__ import annotations
+
+import math
+import struct
+import sys
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fdi_sim import __version__ as _FDI_SIM_VERSION
+from fdi_sim.errors import LogError
+from fdi_sim.flightlog.schemas import (
+    CDR_LE_HEADER,
+    MESSAGE_ENCODING_CDR,
+    MESSAGE_ENCODING_JSON,
+    SCHEMA_ENCODING_JSONSCHEMA,
+    SCHEMA_ENCODING_ROS2MSG,
+    EventSchema,
+    VectorSchema,
+    check_topic,
+    event_schema,
+    vector_schema,
+)
+from fdi_sim.units import NS_PER_S
+
+MCAP_MAGIC: bytes = b"\x89MCAP0\r\n"
+LIBRARY: str = f"fdi-sim {_FDI_SIM_VERSION} flightlog"
+#: zstd level: 1 compresses a chunk of flight data as well as the default 3 at ~25 % less
+#: time (bench_flightlog.py)
+ZSTD_LEVEL: int = 1
+#: log_time is uint64 ns; keep t_s far below its range (and below 2**53 ns for exact floats)
+MAX_T_S: float = 1.0e7
+
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
+_OP_CHUNK, _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX = 0x06, 0x07, 0x08
+_OP_STATISTICS, _OP_METADATA, _OP_METADATA_INDEX = 0x0B, 0x0C, 0x0D
+_OP_SUMMARY_OFFSET, _OP_DATA_END = 0x0E, 0x0F
+#: opcode, record length, channel_id, sequence, log_time, publish_time (22 bytes after the 9)
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+_MESSAGE_FIXED = 2 + 4 + 8 + 8
+_LITTLE = sys.byteorder == "little"
+
+
+def message_dtype(n_fields: int) -> np.dtype:
+    """Packed numpy dtype of one complete MCAP Message record of a vector channel.
+
+    ``itemsize = 1 + 8 + 22 + 4 + 8 * n_fields`` (no padding: the record and the CDR payload
+    are both packed, see :mod:`fdi_sim.flightlog.schemas`).
+    """
+    return np.dtype([
+        ("opcode", "u1"), ("length", "<u8"), ("channel_id", "<u2"), ("sequence", "<u4"),
+        ("log_time", "<u8"), ("publish_time", "<u8"), ("cdr", "u1", (4,)),
+        ("values", "<f8", (n_fields,)),
+    ])
+
+
+@dataclass(frozen=True, eq=False)
+class VectorBlock:
+    """Rows of one vector channel for one chunk.
+
+    Attributes
+    ----------
+    channel_id : int
+        MCAP channel id.
+    first_sequence : int
+        Sequence number of the first row (per-channel message counter).
+    t_s : NDArray
+        Times [s], shape (n,).
+    values : NDArray
+        Values without ``t_s``, shape (n, n_fields - 1).
+    """
+
+    channel_id: int
+    first_sequence: int
+    t_s: NDArray[np.float64]
+    values: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One already-encoded message (events; messages recovered by repair).
+
+    Attributes
+    ----------
+    channel_id : int
+    sequence : int
+    log_time_ns : int
+        Log time = publish time [ns].
+    data : bytes
+        Encoded payload.
+    """
+
+    channel_id: int
+    sequence: int
+    log_time_ns: int
+    data: bytes
+
+
+@dataclass(frozen=True, eq=False)
+class ChunkPayload:
+    """The uncompressed records of one chunk and what its indexes need.
+
+    Attributes
+    ----------
+    records : bytes
+        Concatenated Message records, in log-time order.
+    message_start_ns, message_end_ns : int
+        Earliest and latest log time [ns].
+    message_count : int
+    index : dict
+        channel id -> (log_time_ns, offset) arrays, sorted by log time, offsets into ``records``.
+    """
+
+    records: bytes
+    message_start_ns: int
+    message_end_ns: int
+    message_count: int
+    index: dict[int, tuple[NDArray[np.uint64], NDArray[np.uint64]]]
+
+
+def vector_records(block: VectorBlock) -> NDArray[Any]:
+    """Complete Message records of one :class:`VectorBlock` as a packed structured array.
+
+    log_time = publish_time = round(t_s * 1e9) (round half to even, like Python's ``round``).
+    """
+    t = np.asarray(block.t_s, dtype=np.float64)
+    n, n_values = block.values.shape
+    rec = np.empty(n, dtype=message_dtype(n_values + 1))
+    rec["opcode"] = _OP_MESSAGE
+    rec["length"] = rec.dtype.itemsize - 9
+    rec["channel_id"] = block.channel_id
+    rec["sequence"] = (block.first_sequence + np.arange(n, dtype=np.uint64)) & 0xFFFFFFFF
+    log_ns = np.rint(t * NS_PER_S).astype(np.uint64)
+    rec["log_time"] = log_ns
+    rec["publish_time"] = log_ns
+    rec["cdr"] = np.frombuffer(CDR_LE_HEADER, dtype=np.uint8)
+    rec["values"][:, 0] = t
+    rec["values"][:, 1:] = block.values
+    return rec
+
+
+def build_chunk(blocks: Sequence[VectorBlock], raws: Sequence[RawMessage] = ()) -> ChunkPayload:
+    """Lay out the Message records of one chunk in log-time order and index them.
+
+    Vector rows are interleaved by time (ties: block order, then write order); when every
+    block has the same sorted time vector (the usual case: one row per channel per step) the
+    interleaving is one structured-array copy. Raw messages (events) are spliced in after the
+    vector messages of equal time.
+
+    Parameters
+    ----------
+    blocks : sequence of VectorBlock
+        At most one per channel.
+    raws : sequence of RawMessage
+        Already-encoded messages, any order.
+    """
+    recs = [vector_records(b) for b in blocks if len(b.t_s) > 0]
+    vbytes, vlog, voff, positions = _interleave(recs)
+    n_vec = len(vlog)
+    # raw messages, stably sorted by time, spliced after the vector messages of equal time
+    order = sorted(range(len(raws)), key=lambda i: raws[i].log_time_ns)
+    rlog = np.array([raws[i].log_time_ns for i in order], dtype=np.uint64)
+    rbytes = [_MESSAGE_HEAD.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(raws[i].data), raws[i].channel_id,
+                                 raws[i].sequence & 0xFFFFFFFF, raws[i].log_time_ns,
+                                 raws[i].log_time_ns) + raws[i].data for i in order]
+    rsize = np.array([len(b) for b in rbytes], dtype=np.int64)
+    ins = np.searchsorted(vlog, rlog, side="right")
+    voff_ext = np.append(voff, len(vbytes)).astype(np.int64)
+    if rbytes:
+        view = memoryview(vbytes)
+        pieces: list[Any] = []
+        prev = 0
+        for j, i in enumerate(ins.tolist()):
+            pieces.append(view[voff_ext[prev]:voff_ext[i]])
+            pieces.append(rbytes[j])
+            prev = i
+        pieces.append(view[voff_ext[prev]:])
+        records = b"".join(pieces)
+        inc = np.zeros(n_vec + 1, dtype=np.int64)
+        np.add.at(inc, ins, rsize)
+        # vector message k moves by the sizes of the raw messages inserted before it
+        voff_final = voff + np.cumsum(inc)[:n_vec]
+        roff = voff_ext[ins] + np.concatenate(([0], np.cumsum(rsize)[:-1]))
+    else:
+        records = vbytes
+        voff_final = voff
+        roff = np.zeros(0, dtype=np.int64)
+    per_channel: dict[int, list[tuple[NDArray[Any], NDArray[Any]]]] = {}
+    for rec, pos in zip(recs, positions):
+        cid = int(rec["channel_id"][0])
+        per_channel.setdefault(cid, []).append((rec["log_time"], voff_final[pos]))
+    rch = np.array([raws[i].channel_id for i in order], dtype=np.int64)
+    for cid in np.unique(rch).tolist():
+        sel = rch == cid
+        per_channel.setdefault(int(cid), []).append((rlog[sel], roff[sel]))
+    index: dict[int, tuple[NDArray[np.uint64], NDArray[np.uint64]]] = {}
+    for cid in sorted(per_channel):
+        log = np.concatenate([p[0] for p in per_channel[cid]]).astype(np.uint64)
+        off = np.concatenate([p[1] for p in per_channel[cid]]).astype(np.uint64)
+        o = np.lexsort((off, log))
+        index[cid] = (log[o], off[o])
+    all_log = np.concatenate([vlog, rlog]) if len(rlog) else vlog
+    count = int(len(all_log))
+    return ChunkPayload(
+        records=records,
+        message_start_ns=int(all_log.min()) if count else 0,
+        message_end_ns=int(all_log.max()) if count else 0,
+        message_count=count,
+        index=index,
+    )
+
+
+def _interleave(recs: list[NDArray[Any]]) -> tuple[bytes, NDArray[np.uint64], NDArray[np.int64], list[NDArray[np.int64]]]:
+    """Interleave record arrays by log time: bytes, file-order log times and offsets, and
+    for each input array the file-order positions of its rows."""
+    if not recs:
+        return b"", np.zeros(0, np.uint64), np.zeros(0, np.int64), []
+    log0 = recs[0]["log_time"]
+    regular = bool(np.all(log0[1:] >= log0[:-1])) and all(
+        len(r) == len(log0) and np.array_equal(r["log_time"], log0) for r in recs[1:])
+    k = len(recs)
+    sizes = np.array([r.dtype.itemsize for r in recs], dtype=np.int64)
+    if regular:
+        # one "step" = one record per channel, back to back: a single structured copy
+        n = len(log0)
+        prefix = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+        step = int(sizes.sum())
+        comb = np.empty(n, dtype=np.dtype({"names": [f"m{c}" for c in range(k)],
+                                           "formats": [f"V{s}" for s in sizes.tolist()],
+                                           "offsets": prefix.tolist(), "itemsize": step}))
+        for c, r in enumerate(recs):
+            comb[f"m{c}"] = r.view(f"V{sizes[c]}")
+        voff = (np.arange(n, dtype=np.int64)[:, None] * step + prefix[None, :]).ravel()
+        vlog = np.repeat(log0, k)
+        positions = [np.arange(n, dtype=np.int64) * k + c for c in range(k)]
+        return comb.tobytes(), vlog, voff, positions
+    # general case: stable sort by (log time, block), scatter whole records
+    all_log = np.concatenate([r["log_time"] for r in recs])
+    blk = np.concatenate([np.full(len(r), c, dtype=np.int64) for c, r in enumerate(recs)])
+    order = np.lexsort((blk, all_log))
+    size_sorted = sizes[blk[order]]
+    voff = np.concatenate(([0], np.cumsum(size_sorted)[:-1])).astype(np.int64)
+    inv = np.empty_like(order)
+    inv[order] = np.arange(len(order))
+    out = np.empty(int(size_sorted.sum()), dtype=np.uint8)
+    positions = []
+    start = 0
+    for c, r in enumerate(recs):
+        pos = inv[start:start + len(r)]
+        start += len(r)
+        s = int(sizes[c])
+        # writable (overlapping) window view: row i covers out[i : i + s]; targets don't overlap
+        win = np.lib.stride_tricks.as_strided(out, shape=(len(out) - s + 1, s), strides=(1, 1))
+        win[voff[pos]] = r.view(np.uint8).reshape(len(r), s)
+        positions.append(pos)
+    return out.tobytes(), all_log[order], voff, positions
+
+
+def encode_message_index(channel_id: int, log_time_ns: NDArray[Any], offsets: NDArray[Any]) -> bytes:
+    """One Message Index record (MCAP spec, "Message Index", op 0x07)."""
+    entries = np.empty((len(log_time_ns), 2), dtype="<u8")
+    entries[:, 0] = log_time_ns
+    entries[:, 1] = offsets
+    body = entries.tobytes()
+    return struct.pack("<BQHI", _OP_MESSAGE_INDEX, 2 + 4 + len(body), channel_id, len(body)) + body
+
+
+def _string(s: str) -> bytes:
+    b = s.encode("utf-8")
+    return struct.pack("<I", len(b)) + b
+
+
+def _string_map(m: Mapping[str, str]) -> bytes:
+    body = b"".join(_string(k) + _string(v) for k, v in m.items())
+    return struct.pack("<I", len(body)) + body
+
+
+def _record(opcode: int, body: bytes) -> bytes:
+    return struct.pack("<BQ", opcode, len(body)) + body
+
+
+class McapFileWriter:
+    """Low-level MCAP file writer: records in, a valid indexed file out.
+
+    Used by :class:`FlightLogWriter` and by repair. Schemas, channels and metadata are
+    written to the data section as they come (so a cut-off file keeps them); messages go in
+    chunks given as :class:`ChunkPayload`.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (created or truncated).
+    compression : {"zstd", "lz4", None}
+        Chunk compression.
+    """
+
+    def __init__(self, path: str | Path, compression: str | None = "zstd") -> None:
+        self.path = Path(path)
+        if compression not in ("zstd", "lz4", None, ""):
+            raise LogError(str(path), f"compression {compression!r} is not one of 'zstd', 'lz4', None")
+        self._compression = compression or ""
+        if self._compression == "zstd":
+            import zstandard
+            self._compress = zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress
+        elif self._compression == "lz4":
+            import lz4.frame
+            self._compress = lz4.frame.compress
+        else:
+            self._compress = bytes
+        try:
+            self._f = open(self.path, "wb")  # noqa: SIM115 - closed in finish()/abort()
+        except OSError as exc:
+            raise LogError(str(path), f"cannot open the flight log for writing ({exc.strerror}); "
+                           "choose a writable output directory") from None
+        self._pos = 0
+        self._crc = 0
+        self._schemas: dict[int, bytes] = {}
+        self._channels: dict[int, bytes] = {}
+        self._chunk_indexes: list[bytes] = []
+        self._metadata_indexes: list[bytes] = []
+        self._counts: dict[int, int] = {}
+        self._n_messages = 0
+        self._start_ns: int | None = None
+        self._end_ns = 0
+        self._open = True
+        try:
+            self._write(MCAP_MAGIC)
+            self._write(_record(_OP_HEADER, _string("") + _string(LIBRARY)))
+        except OSError as exc:
+            self.abort()
+            raise LogError(str(path), f"cannot write the flight log ({exc})") from None
+
+    # -- data section ----------------------------------------------------------------------
+    def _write(self, data: bytes) -> None:
+        self._f.write(data)
+        self._pos += len(data)
+        self._crc = zlib.crc32(data, self._crc)
+
+    def add_schema(self, schema_id: int, name: str, encoding: str, data: bytes) -> None:
+        """Write a Schema record (op 0x03)."""
+        rec = _record(_OP_SCHEMA, struct.pack("<H", schema_id) + _string(name) + _string(encoding)
+                      + struct.pack("<I", len(data)) + data)
+        self._schemas[schema_id] = rec
+        self._write(rec)
+
+    def add_channel(self, channel_id: int, schema_id: int, topic: str, message_encoding: str,
+                    metadata: Mapping[str, str] | None = None) -> None:
+        """Write a Channel record (op 0x04)."""
+        rec = _record(_OP_CHANNEL, struct.pack("<HH", channel_id, schema_id) + _string(topic)
+                      + _string(message_encoding) + _string_map(metadata or {}))
+        self._channels[channel_id] = rec
+        self._counts.setdefault(channel_id, 0)
+        self._write(rec)
+
+    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """Write a Metadata record (op 0x0C) and remember its index."""
+        rec = _record(_OP_METADATA, _string(name) + _string_map(data))
+        self._metadata_indexes.append(_record(
+            _OP_METADATA_INDEX, struct.pack("<QQ", self._pos, len(rec)) + _string(name)))
+        self._write(rec)
+
+    def write_chunk(self, payload: ChunkPayload) -> None:
+        """Write one Chunk record and its Message Index records (nothing if empty)."""
+        if payload.message_count == 0:
+            return
+        raw = payload.records
+        packed = self._compress(raw)
+        cname = self._compression.encode()
+        head = struct.pack("<QQQI", payload.message_start_ns, payload.message_end_ns, len(raw),
+                           zlib.crc32(raw)) + struct.pack("<I", len(cname)) + cname + struct.pack("<Q", len(packed))
+        chunk_start = self._pos
+        self._write(struct.pack("<BQ", _OP_CHUNK, len(head) + len(packed)) + head)
+        self._write(packed)
+        chunk_length = self._pos - chunk_start
+        index_start = self._pos
+        offsets = b""
+        for cid, (log, off) in payload.index.items():
+            offsets += struct.pack("<HQ", cid, self._pos)
+            self._write(encode_message_index(cid, log, off))
+            self._counts[cid] = self._counts.get(cid, 0) + len(log)
+        self._chunk_indexes.append(_record(_OP_CHUNK_INDEX, struct.pack(
+            "<QQQQI", payload.message_start_ns, payload.message_end_ns, chunk_start, chunk_length,
+            len(offsets)) + offsets + struct.pack("<Q", self._pos - index_start) + _string(self._compression)
+            + struct.pack("<QQ", len(packed), len(raw))))
+        self._n_messages += payload.message_count
+        if self._start_ns is None or payload.message_start_ns < self._start_ns:
+            self._start_ns = payload.message_start_ns
+        self._end_ns = max(self._end_ns, payload.message_end_ns)
+
+    def flush(self) -> None:
+        """Push everything written so far to the operating system (survives SIGKILL)."""
+        self._f.flush()
+
+    # -- summary and footer ----------------------------------------------------------------
+    def finish(self) -> None:
+        """Write Data End, the summary section, the footer and the closing magic; close."""
+        if not self._open:
+            return
+        try:
+            self._write(_record(_OP_DATA_END, struct.pack("<I", self._crc)))
+            summary_start = self._pos
+            groups: list[tuple[int, bytes]] = [
+                (_OP_SCHEMA, b"".join(self._schemas[k] for k in sorted(self._schemas))),
+                (_OP_CHANNEL, b"".join(self._channels[k] for k in sorted(self._channels))),
+                (_OP_STATISTICS, self._statistics()),
+                (_OP_CHUNK_INDEX, b"".join(self._chunk_indexes)),
+                (_OP_METADATA_INDEX, b"".join(self._metadata_indexes)),
+            ]
+            summary = b""
+            offsets = b""
+            for opcode, data in groups:
+                if data:
+                    offsets += _record(_OP_SUMMARY_OFFSET, struct.pack(
+                        "<BQQ", opcode, summary_start + len(summary), len(data)))
+                    summary += data
+            offset_start = summary_start + len(summary)
+            summary += offsets
+            # Footer: summary_start, summary_offset_start, summary_crc; the CRC covers the
+            # summary section and the footer fields before it (MCAP spec, "Footer")
+            footer_head = struct.pack("<BQQQ", _OP_FOOTER, 20, summary_start, offset_start)
+            crc = zlib.crc32(footer_head, zlib.crc32(summary))
+            self._f.write(summary + footer_head + struct.pack("<I", crc) + MCAP_MAGIC)
+            self._f.flush()
+        finally:
+            self._open = False
+            self._f.close()
+
+    def _statistics(self) -> bytes:
+        counts = b"".join(struct.pack("<HQ", k, self._counts[k]) for k in sorted(self._counts))
+        return _record(_OP_STATISTICS, struct.pack(
+            "<QHIIIIQQI", self._n_messages, len(self._schemas), len(self._channels), 0,
+            len(self._metadata_indexes), len(self._chunk_indexes), self._start_ns or 0, self._end_ns,
+            len(counts)) + counts)
+
+    def abort(self) -> None:
+        """Close the file without a footer (after an I/O error)."""
+        if self._open:
+            self._open = False
+            try:
+                self._f.close()
+            except OSError:
+                pass
+
+
+class VectorChannel:
+    """A vector channel of a :class:`FlightLogWriter`; get one from ``add_vector_channel``."""
+
+    __slots__ = ("_w", "topic", "schema", "channel_id", "_t", "_b", "_shape", "_pack", "_seq")
+
+    def __init__(self, writer: FlightLogWriter, topic: str, schema: VectorSchema, channel_id: int) -> None:
+        self._w = writer
+        self.topic = topic
+        self.schema = schema
+        self.channel_id = channel_id
+        self._t: list[float] = []
+        self._b: list[bytes] = []
+        self._shape = (schema.n_values,)
+        self._pack = struct.Struct(f"<{schema.n_values}d").pack
+        self._seq = 0
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        """Field names, ``t_s`` first."""
+        return self.schema.fields
+
+    def write(self, t_s: float, values: Any) -> None:
+        """Log one row.
+
+        Parameters
+        ----------
+        t_s : float
+            Simulated time [s], finite, >= 0; log_time = publish_time = round(t_s * 1e9) ns.
+        values : 1-D float array or sequence
+            ``len(fields) - 1`` values in field order, without ``t_s``. Copied.
+        """
+        w = self._w
+        try:
+            in_window = 0.0 <= t_s < w._hi_t_s
+        except TypeError:
+            in_window = False
+        if not in_window:
+            w._time_slow_path(t_s, self.topic)
+        if type(values) is np.ndarray and values.dtype is _F8 and values.shape == self._shape and _LITTLE:
+            b = values.tobytes()
+        else:
+            b = self._values_slow_path(values)
+        self._t.append(t_s)
+        self._b.append(b)
+
+    def _values_slow_path(self, values: Any) -> bytes:
+        if not isinstance(values, np.ndarray):
+            try:
+                return self._pack(*values)
+            except (struct.error, TypeError):
+                pass
+        try:
+            arr = np.asarray(values, dtype=np.float64)
+        except (TypeError, ValueError):
+            arr = None
+        if arr is None or arr.shape != self._shape:
+            got = getattr(arr, "shape", type(values).__name__)
+            raise LogError(str(self._w.path), f"{self.topic}: write() needs {self.schema.n_values} "
+                           f"float values for {self.schema.fields[1:]} (without t_s), got {got}")
+        return arr.astype("<f8").tobytes()
+
+    def _take(self) -> VectorBlock | None:
+        n = len(self._t)
+        if n == 0:
+            return None
+        values = np.frombuffer(b"".join(self._b), dtype="<f8").reshape(n, self.schema.n_values)
+        block = VectorBlock(self.channel_id, self._seq, np.array(self._t, dtype=np.float64), values)
+        self._seq += n
+        self._t = []
+        self._b = []
+        return block
+
+
+class EventChannel:
+    """An event (JSON) channel of a :class:`FlightLogWriter`; get one from ``add_event_channel``."""
+
+    __slots__ = ("_w", "topic", "schema", "channel_id", "_seq")
+
+    def __init__(self, writer: FlightLogWriter, topic: str, schema: EventSchema, channel_id: int) -> None:
+        self._w = writer
+        self.topic = topic
+        self.schema = schema
+        self.channel_id = channel_id
+        self._seq = 0
+
+    def write(self, t_s: float, payload: Mapping[str, Any]) -> None:
+        """Log one event at simulated time ``t_s`` [s]; ``payload`` is a JSON-able dict."""
+        w = self._w
+        try:
+            in_window = 0.0 <= t_s < w._hi_t_s
+        except TypeError:
+            in_window = False
+        if not in_window:
+            w._time_slow_path(t_s, self.topic)
+        try:
+            data = self.schema.encode(payload)
+        except LogError as exc:
+            raise LogError(str(w.path), f"{self.topic}: {exc.problem}") from None
+        w._pending_raw.append(RawMessage(self.channel_id, self._seq, int(round(float(t_s) * NS_PER_S)), data))
+        self._seq += 1
+
+
+_F8 = np.dtype(np.float64)
+
+
+class FlightLogWriter:
+    """Write one run's MCAP flight log (context manager).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file; opened (created or truncated) at once, so an unwritable path fails
+        before the simulation starts.
+    metadata : dict of str to dict of str to str, optional
+        Metadata records written first (``{"scenario": {"name": ..., "seed": ..., "text": ...}}``).
+    flush_period_s : float
+        Simulated time between flushes to disk [s]: a crash loses at most this much.
+    compression : {"zstd", "lz4", None}
+        Chunk compression.
+
+    Raises
+    ------
+    LogError
+        Unwritable path, bad metadata, bad period or compression.
+
+    Examples
+    --------
+    >>> with FlightLogWriter("run.mcap", metadata={"scenario": {"name": "demo"}}) as log:  # doctest: +SKIP
+    ...     truth = log.add_vector_channel("/truth/state", "fdi_sim/msg/TruthState",
+    ...                                    ("t_s", "alpha_rad", "q_radps"))
+    ...     truth.write(0.0, [0.05, 0.0])
+    """
+
+    def __init__(self, path: str | Path, *, metadata: Mapping[str, Mapping[str, str]] | None = None,
+                 flush_period_s: float = 1.0, compression: str | None = "zstd") -> None:
+        self.path = Path(path)
+        try:
+            period_ok = math.isfinite(flush_period_s) and flush_period_s > 0.0
+        except TypeError:
+            period_ok = False
+        if not period_ok:
+            raise LogError(str(path), f"flush_period_s = {flush_period_s!r} must be a finite time > 0 s")
+        self.flush_period_s = float(flush_period_s)
+        records = [(name, _check_metadata(str(path), name, data)) for name, data in (metadata or {}).items()]
+        self._file = McapFileWriter(self.path, compression)
+        self._closed = False
+        self._hi_t_s = self.flush_period_s
+        self._last_flush_t_s = 0.0
+        self._schemas: dict[str, tuple[int, object]] = {}
+        self._channels: dict[str, VectorChannel | EventChannel] = {}
+        self._vector: list[VectorChannel] = []
+        self._pending_raw: list[RawMessage] = []
+        self._metadata_names: set[str] = set()
+        try:
+            for name, data in records:
+                self._metadata(name, data)
+            self._file.flush()
+        except OSError as exc:
+            self._file.abort()
+            raise LogError(str(path), f"cannot write the flight log ({exc})") from None
+
+    # -- context manager -------------------------------------------------------------------
+    def __enter__(self) -> FlightLogWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- channels --------------------------------------------------------------------------
+    def add_vector_channel(self, topic: str, schema_name: str, fields: Sequence[str]) -> VectorChannel:
+        """Add a channel of float64 rows (CDR, ``ros2msg`` schema).
+
+        Parameters
+        ----------
+        topic : str
+            ``/stage/name`` (``"/truth/state"``).
+        schema_name : str
+            ``package/msg/Type`` (``"fdi_sim/msg/TruthState"``); channels may share a schema
+            if they also share its fields.
+        fields : sequence of str
+            Unit-suffixed names, ``"t_s"`` first.
+        """
+        schema = self._wrap(vector_schema, schema_name, fields)
+        sid = self._schema_id(schema, SCHEMA_ENCODING_ROS2MSG, schema.ros2msg().encode())
+        cid = self._new_channel(topic, sid, MESSAGE_ENCODING_CDR)
+        ch = VectorChannel(self, topic, schema, cid)
+        self._channels[topic] = ch
+        self._vector.append(ch)
+        return ch
+
+    def add_event_channel(self, topic: str, schema_name: str, json_schema: Mapping[str, Any]) -> EventChannel:
+        """Add a low-rate JSON channel with a JSON Schema (``jsonschema`` / ``json``)."""
+        schema = self._wrap(event_schema, schema_name, json_schema)
+        sid = self._schema_id(schema, SCHEMA_ENCODING_JSONSCHEMA, schema.json_text.encode())
+        cid = self._new_channel(topic, sid, MESSAGE_ENCODING_JSON)
+        ch = EventChannel(self, topic, schema, cid)
+        self._channels[topic] = ch
+        return ch
+
+    def _wrap(self, factory: Any, *args: Any) -> Any:
+        self._check_open()
+        try:
+            return factory(*args)
+        except LogError as exc:
+            raise LogError(str(self.path), exc.problem) from None
+
+    def _schema_id(self, schema: VectorSchema | EventSchema, encoding: str, data: bytes) -> int:
+        known = self._schemas.get(schema.name)
+        if known is not None:
+            if known[1] != schema:
+                raise LogError(str(self.path), f"schema {schema.name!r} is already defined differently; "
+                               "give the new layout its own schema name")
+            return known[0]
+        sid = len(self._schemas) + 1
+        self._io(self._file.add_schema, sid, schema.name, encoding, data)
+        self._schemas[schema.name] = (sid, schema)
+        return sid
+
+    def _new_channel(self, topic: str, schema_id: int, encoding: str) -> int:
+        try:
+            check_topic(topic)
+        except LogError as exc:
+            raise LogError(str(self.path), exc.problem) from None
+        if topic in self._channels:
+            raise LogError(str(self.path), f"topic {topic!r} already has a channel; use that channel")
+        cid = len(self._channels) + 1
+        self._io(self._file.add_channel, cid, schema_id, topic, encoding)
+        return cid
+
+    # -- metadata, flush, close ------------------------------------------------------------
+    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """Write a metadata record now (``name`` unique in the file, values strings)."""
+        self._check_open()
+        self._metadata(name, _check_metadata(str(self.path), name, data))
+        self._io(self._file.flush)
+
+    def _metadata(self, name: str, data: dict[str, str]) -> None:
+        if name in self._metadata_names:
+            raise LogError(str(self.path), f"metadata record {name!r} was already written; "
+                           "put all its keys in one record")
+        self._metadata_names.add(name)
+        self._io(self._file.add_metadata, name, data)
+
+    def flush(self) -> None:
+        """Write everything buffered as one chunk and push it to the operating system."""
+        self._check_open()
+        t_max = self._write_pending()
+        if t_max is not None:
+            self._last_flush_t_s = max(self._last_flush_t_s, t_max)
+
+    @property
+    def last_flush_t_s(self) -> float:
+        """Simulated time [s] that triggered the last flush: every message written before
+        that write is on disk."""
+        return self._last_flush_t_s
+
+    @property
+    def closed(self) -> bool:
+        """True after :meth:`close`."""
+        return self._closed
+
+    def close(self) -> None:
+        """Flush, write the summary and footer, close. Idempotent; safe in ``finally``."""
+        if self._closed:
+            return
+        self._closed = True
+        self._hi_t_s = -math.inf  # every later write takes the slow path and raises
+        try:
+            self._write_pending()
+            self._io(self._file.finish)
+        finally:
+            self._file.abort()  # no-op after a clean finish
+
+    # -- internals -------------------------------------------------------------------------
+    def _check_open(self) -> None:
+        if self._closed:
+            raise LogError(str(self.path), "the flight log is closed; open a new FlightLogWriter")
+
+    def _io(self, fn: Any, *args: Any) -> None:
+        try:
+            fn(*args)
+        except OSError as exc:
+            self._closed = True
+            self._hi_t_s = -math.inf
+            self._file.abort()
+            raise LogError(str(self.path), f"write failed ({exc}); the file was left without "
+                           "its summary: run `fdi-sim repair` on it") from None
+
+    def _time_slow_path(self, t_s: Any, topic: str) -> None:
+        """A write whose time is outside the current flush window: flush, or raise."""
+        self._check_open()
+        try:
+            t = float(t_s)
+        except (TypeError, ValueError):
+            raise LogError(str(self.path), f"{topic}: t_s = {t_s!r} is not a number") from None
+        if not (0.0 <= t < MAX_T_S):
+            raise LogError(str(self.path), f"{topic}: t_s = {t_s!r} must be finite, >= 0 s and "
+                           f"< {MAX_T_S:g} s")
+        if t >= self._hi_t_s:
+            self._write_pending()
+            self._last_flush_t_s = t
+            k = math.floor(t / self.flush_period_s) + 1
+            while k * self.flush_period_s <= t:
+                k += 1
+            self._hi_t_s = k * self.flush_period_s
+
+    def _write_pending(self) -> float | None:
+        """Write the buffered messages as one chunk, flush; return their latest time [s]."""
+        blocks = [b for b in (ch._take() for ch in self._vector) if b is not None]
+        raws, self._pending_raw = self._pending_raw, []
+        t_max = None
+        if blocks or raws:
+            payload = build_chunk(blocks, raws)
+            t_max = payload.message_end_ns / NS_PER_S
+            self._io(self._file.write_chunk, payload)
+        self._io(self._file.flush)
+        return t_max
+
+
+def _check_metadata(path: str, name: Any, data: Any) -> dict[str, str]:
+    """Validate one metadata record: a non-empty name and a dict of str to str."""
+    if not isinstance(name, str) or not name:
+        raise LogError(path, f"metadata name {name!r} must be a non-empty string")
+    if not isinstance(data, Mapping):
+        raise LogError(path, f"metadata {name!r} must be a dict of str to str, got {type(data).__name__}")
+    bad = [k for k, v in data.items() if not isinstance(k, str) or not isinstance(v, str)]
+    if bad:
+        raise LogError(path, f"metadata {name!r}: keys and values must be strings (convert with str()); "
+                       f"offending keys {bad!r}")
+    return dict(data)
