@@ -128,8 +128,11 @@ def from_dict(data: Mapping[str, Any], source: str = "<scenario>", text: str | N
                 raise ScenarioError(source, f"{key}.type", f"missing or not a string", f"set type to one of: {known}")
             try:
                 spec = registry.get(kind, type_id)
-            except RegistryError as exc:
-                raise ScenarioError(source, f"{key}.type", str(exc), "use an id from `fdi-sim plugins`") from None
+            except RegistryError:
+                known = registry.ids(kind)
+                close = difflib.get_close_matches(type_id, known, n=2, cutoff=0.5)
+                fix = (f"did you mean {' or '.join(close)}? " if close else "") + f"known {kind} ids: {', '.join(known) or 'none yet'}"
+                raise ScenarioError(source, f"{key}.type", f"unknown {kind} id {type_id!r}", fix) from None
             if spec.params is None or not (isinstance(spec.params, type) and issubclass(spec.params, BaseModel)):
                 params: Any = dict(entry)
             else:
@@ -205,6 +208,8 @@ def _to_scenario_error(exc: ValidationError, source: str, model: type[BaseModel]
         fix = f"use one of {ctx['expected']}"
     elif any(k in ctx for k in ("ge", "gt", "le", "lt")):
         fix = "use a value " + " and ".join(f"{ {'ge': '>=', 'gt': '>', 'le': '<=', 'lt': '<'}[k]} {v}" for k, v in ctx.items() if k in ("ge", "gt", "le", "lt"))
+    elif typ == "value_error":
+        return ScenarioError(source, key, "invalid section", msg.removeprefix("Value error, "))
     elif typ.endswith("_type") or typ.endswith("_parsing"):
         fix = f"give a {typ.split('_')[0]}"
     return ScenarioError(source, key, f"{msg} (got {shown})", fix or "see the scenario reference in README.md")

@@ -1,0 +1,126 @@
+"""Strict scenario files: every kind of bad input is one ScenarioError naming file, key and fix."""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fdi_sim.errors import ScenarioError
+from fdi_sim.scenario import from_dict, load, loads
+
+SCENARIOS = sorted((Path(__file__).resolve().parents[2] / "scenarios").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_shipped_scenarios_validate(path: Path) -> None:
+    sc = load(path)
+    assert sc.name == path.stem
+    assert sc.text == path.read_text()
+
+
+@pytest.mark.parametrize("old,new,key,fix", [
+    ("h_ft = 10000.0", "h = 10000.0", "initial.h", "h_ft"),
+    ("vt_kts = 400.0", "vt_kts = -400.0", "initial.vt_kts", "> 50"),
+    ('"doublet-v1"', '"doublet-v2"', "maneuvers[0].type", "doublet-v1"),
+    ('aircraft = "f16"', 'aircraft = "f15"', "aircraft", "'f16'"),
+    ("duration_s = 10.0", "duration_s = -1.0", "duration_s", "> 0"),
+    ('axis = "elevator"', 'axis = "elevatr"', "maneuvers[0].axis", "'elevator'"),
+    ("[atmosphere]", "[atmospheer]", "atmospheer", "atmosphere"),
+    ("vt_kts = 400.0", "", "initial", "vt_kts"),
+    ("t_start_s = 2.0", "t_start_s = 20.0", "maneuvers[0].t_start_s", "duration_s"),
+])
+def test_bad_keys_name_file_key_and_fix(f16_text: str, old: str, new: str, key: str, fix: str) -> None:
+    assert old in f16_text
+    with pytest.raises(ScenarioError) as ei:
+        loads(f16_text.replace(old, new), "bad.toml")
+    e = ei.value
+    assert e.source == "bad.toml"
+    assert e.key == key, str(e)
+    assert fix in e.fix, str(e)
+    assert str(e).startswith("bad.toml: ")
+
+
+def test_missing_file_and_wrong_suffix(tmp_path: Path) -> None:
+    with pytest.raises(ScenarioError, match="no such file"):
+        load(tmp_path / "nope.toml")
+    p = tmp_path / "x.yaml"
+    p.write_text("a: 1")
+    with pytest.raises(ScenarioError, match="TOML"):
+        load(p)
+
+
+def test_replace_revalidates(f16_text: str) -> None:
+    sc = loads(f16_text)
+    assert sc.replace(seed=3).seed == 3
+    with pytest.raises(ScenarioError):
+        sc.replace(duration_s=-5.0)
+
+
+# ---------------------------------------------------------------- property-based: only ScenarioError
+_BASE: dict[str, Any] = tomllib.loads((Path(__file__).resolve().parents[2] / "scenarios" / "f16_cruise_doublets.toml").read_text())
+_values = st.one_of(
+    st.none(), st.booleans(), st.integers(-10**12, 10**12), st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=12), st.lists(st.integers(), max_size=3), st.dictionaries(st.text(max_size=5), st.integers(), max_size=2),
+)
+
+
+def _paths(d: Any, prefix: tuple = ()) -> list[tuple]:
+    out = [prefix] if prefix else []
+    if isinstance(d, dict):
+        for k, v in d.items():
+            out += _paths(v, prefix + (k,))
+    elif isinstance(d, list):
+        for i, v in enumerate(d):
+            out += _paths(v, prefix + (i,))
+    return out
+
+
+_ALL_PATHS = _paths(_BASE)
+
+
+@st.composite
+def mutated(draw: st.DrawFn) -> dict[str, Any]:
+    import copy
+
+    d = copy.deepcopy(_BASE)
+    for _ in range(draw(st.integers(1, 3))):
+        path = draw(st.sampled_from(_ALL_PATHS))
+        parent: Any = d
+        try:
+            for p in path[:-1]:
+                parent = parent[p]
+            action = draw(st.sampled_from(["set", "delete", "add_key", "rename"]))
+            last = path[-1]
+            if action == "set":
+                parent[last] = draw(_values)
+            elif action == "delete":
+                del parent[last]
+            elif action == "add_key" and isinstance(parent, dict):
+                parent[draw(st.text(min_size=1, max_size=10))] = draw(_values)
+            elif action == "rename" and isinstance(parent, dict):
+                parent[str(last) + draw(st.text(min_size=1, max_size=3))] = parent.pop(last)
+        except (KeyError, IndexError, TypeError):
+            continue
+    return d
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated())
+def test_mutated_scenarios_raise_only_scenario_error(data: dict[str, Any]) -> None:
+    try:
+        from_dict(data, "mutated.toml")
+    except ScenarioError as e:
+        assert e.source == "mutated.toml"
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(max_size=200))
+def test_arbitrary_text_raises_only_scenario_error(text: str) -> None:
+    try:
+        loads(text, "garbage.toml")
+    except ScenarioError:
+        pass

@@ -1,0 +1,95 @@
+"""The command line: exit codes, messages without tracebacks, and the log commands on real files."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fdi_sim.cli import main
+from fdi_sim.flightlog import read_log
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_run_info_plugins_scenarios(tmp_path: Path, capsys: pytest.CaptureFixture[str], f16_text: str) -> None:
+    scn = tmp_path / "s.toml"
+    scn.write_text(f16_text)
+    assert main(["run", str(scn), "--out", str(tmp_path), "--duration", "3", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "status     completed" in out and "log " in out
+    log = next(tmp_path.glob("*.mcap"))
+    assert main(["info", str(log)]) == 0
+    info = capsys.readouterr().out
+    assert "/truth/state" in info and "t_f16" in info
+    assert main(["plugins"]) == 0
+    assert "doublet-v1" in capsys.readouterr().out
+    assert main(["scenarios"]) == 0
+    listing = capsys.readouterr().out
+    assert all(p.stem in listing for p in (ROOT / "scenarios").glob("*.toml"))
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["run", "scenarios/does_not_exist.toml"], "no such file"),
+    (["info", "pyproject.toml"], "not an MCAP"),
+])
+def test_bad_input_exit_2_one_paragraph(capsys: pytest.CaptureFixture[str], args: list[str], needle: str) -> None:
+    os.chdir(ROOT)
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert needle in err and "Traceback" not in err
+
+
+def test_typo_key_and_untrimmable_point(tmp_path: Path, capsys: pytest.CaptureFixture[str], f16_text: str) -> None:
+    bad = tmp_path / "typo.toml"
+    bad.write_text(f16_text.replace("h_ft", "hft"))
+    assert main(["run", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "typo.toml: initial.hft: unknown key" in err and "h_ft" in err
+    dhc = tmp_path / "fast.toml"
+    dhc.write_text(f16_text.replace('"f16"', '"DHC6"').replace("h_ft = 10000.0", "h_ft = 5000.0").replace("vt_kts = 400.0", "vc_kts = 150.0"))
+    assert main(["run", str(dhc), "--out", str(tmp_path)]) == 2
+    assert "cannot trim DHC6" in capsys.readouterr().err
+
+
+def test_unwritable_output_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str], f16_text: str) -> None:
+    scn = tmp_path / "s.toml"
+    scn.write_text(f16_text)
+    blocker = tmp_path / "file"
+    blocker.write_text("x")  # a file where the folder should be: fails even as root
+    assert main(["run", str(scn), "--out", str(blocker / "sub")]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_sigkill_halfway_then_repair(tmp_path: Path, f16_text: str) -> None:
+    """Bar: a run killed with SIGKILL halfway is repaired by `fdi-sim repair` and reads back."""
+    scn = tmp_path / "long.toml"
+    scn.write_text(f16_text.replace("duration_s = 10.0", "duration_s = 600.0"))
+    log = tmp_path / "killed.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "fdi_sim.cli", "run", str(scn), "--log", str(log), "--quiet"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline and (not log.exists() or log.stat().st_size < 400_000):
+            time.sleep(0.05)
+        assert proc.poll() is None, "the run ended before it could be killed"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    with pytest.raises(Exception):
+        read_log(log)  # no summary: the reader refuses and points at repair
+    out = tmp_path / "fixed.mcap"
+    assert main(["repair", str(log), "--out", str(out)]) == 0
+    rep = read_log(out)
+    t = rep.topics["/truth/state"].t_s
+    assert t[-1] > 5.0
+    # every step present from 0 to the last recovered time: nothing lost but the unflushed tail
+    assert len(t) == round(t[-1] * 120) + 1
+    statuses = [e.payload["event"] for e in rep.topics["/sim/status"].events]
+    assert statuses == ["start"]
