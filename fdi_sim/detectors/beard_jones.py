@@ -1,0 +1,805 @@
+"""Beard-Jones fault detection filters (Miller & Ribbens, US 6,643,569 B2, App. A, eq. 2.1-2.54).
+
+A detection filter is a full-order observer ``xh' = A xh + B u + L (y - C xh - D u)`` whose gain
+``L`` makes the output error ``r = y - yh`` keep the fixed direction ``C f_i`` whenever the fault
+``f_i n_i(t)`` acts, during the transient and in steady state (Definition 2.1.1).
+
+Design, for each hypothesized direction ``f_i`` (seed ``002_d6038a6910cf5866.txt``):
+
+1. output separability: ``rank [C f_1 ... C f_r] = r`` (Lemma 2.1.2, eq. 2.10); a direction with
+   ``C f_i = 0`` is replaced by ``A^mu f_i`` (eq. 2.15-2.16, 2.27);
+2. detection space ``D_f = N(M)`` with ``M = [C'; C'K'; ...; C'K'^(n-1)]`` (eq. 2.34-2.37,
+   Definition 2.1.3), completion space its orthogonal complement (Definition 2.1.4);
+3. the detection generator ``g`` (Definition 2.1.2, eq. 2.11-2.20);
+4. the detection gain: ``L_i`` assigns the poles on ``D_f`` (eq. 2.39-2.46 generalised to
+   order k by eq. 2.24), then ``L_p`` places the remaining poles on ``(A_i, C_i)`` and
+   ``L = L_i + L_p (I - Cf (Cf)^+)`` (eq. 2.50).
+
+Several output-separable faults share one filter when their detection spaces are independent
+and no unassignable pole is unstable; otherwise :func:`plan_bank` splits them into a bank.
+
+The algebra holds for continuous (``dx/dt``) and discrete (``x(k+1)``) models alike; poles are
+given in the model's own domain. :func:`design_detection_filter` discretizes a continuous model
+(poles mapped ``z = exp(s dt)``, fault directions ``f -> int_0^dt e^(A t) dt f``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+import scipy.linalg as sla
+from numpy.typing import NDArray
+from scipy.signal import place_poles
+from scipy.stats import chi2
+
+from fdi_sim.detectors.base import Residual
+from fdi_sim.errors import DesignError
+from fdi_sim.linear.model import LinearModel
+
+Array = NDArray[np.float64]
+
+
+class PoleCountError(DesignError):
+    """The number of completion poles given differs from the number the design can place.
+
+    Attributes
+    ----------
+    n_placeable : int
+        How many completion poles this design can place.
+    """
+
+    def __init__(self, message: str, n_placeable: int) -> None:
+        super().__init__(message)
+        self.n_placeable = n_placeable
+
+# ----------------------------------------------------------------------------- linear algebra
+
+
+def _rank(M: NDArray, rtol: float = 1e-9) -> int:
+    """Numerical rank by SVD, relative to the largest singular value (absolute floor 1e-12)."""
+    if M.size == 0:
+        return 0
+    s = np.linalg.svd(M, compute_uv=False)
+    return int(np.sum(s > max(rtol * (s[0] if s.size else 0.0), 1e-12)))
+
+
+def null_basis(M: NDArray, rtol: float = 1e-9) -> Array:
+    """Orthonormal basis (columns) of the null space of ``M``, by SVD."""
+    n = M.shape[1]
+    if M.shape[0] == 0:
+        return np.eye(n)
+    _, s, vt = np.linalg.svd(M)
+    r = int(np.sum(s > max(rtol * (s[0] if s.size else 0.0), 1e-12)))
+    return vt[r:].T.copy()
+
+
+def range_basis(M: NDArray, rtol: float = 1e-9) -> Array:
+    """Orthonormal basis (columns) of the range of ``M``, by SVD."""
+    if M.size == 0:
+        return np.zeros((M.shape[0], 0))
+    u, s, _ = np.linalg.svd(M, full_matrices=False)
+    r = int(np.sum(s > max(rtol * s[0], 1e-12)))
+    return u[:, :r].copy()
+
+
+def observability_matrix(A: NDArray, C: NDArray) -> Array:
+    """``[C; CA; ...; CA^(n-1)]``."""
+    n = A.shape[0]
+    blocks, Ck = [], np.asarray(C, dtype=float)
+    for _ in range(n):
+        blocks.append(Ck)
+        Ck = Ck @ A
+    return np.vstack(blocks)
+
+
+def _pinv_col(c: Array) -> Array:
+    """Pseudo-inverse of a column (or full-column-rank) matrix: ``(c' c)^-1 c'`` (Lemma 2.1.5)."""
+    c2 = np.atleast_2d(c.T).T if c.ndim == 1 else c
+    return np.linalg.solve(c2.T @ c2, c2.T)
+
+
+def angle_rad(a: Array, b: Array) -> float:
+    """Angle between two vectors [rad], sign-insensitive (a direction, not an orientation)."""
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    if na == 0.0 or nb == 0.0:
+        return float("nan")
+    ua, ub = np.asarray(a, float) / na, np.asarray(b, float) / nb
+    c = float(np.dot(ua, ub))
+    return float(np.arctan2(np.linalg.norm(ua - c * ub), abs(c)))  # accurate near 0, unlike arccos
+
+
+def _is_stable(poles: NDArray, discrete: bool) -> bool:
+    return bool(np.all(np.abs(poles) < 1.0)) if discrete else bool(np.all(np.real(poles) < 0.0))
+
+
+def check_observable(A: NDArray, C: NDArray, rtol: float = 1e-9) -> None:
+    """Raise :class:`DesignError` if ``(A, C)`` is not observable (Lemma 2.1.3, condition 1)."""
+    n = A.shape[0]
+    r = _rank(observability_matrix(A, C), rtol)
+    if r < n:
+        unobs = null_basis(observability_matrix(A, C), rtol)
+        raise DesignError(
+            f"(A, C) is not observable: observability matrix rank {r} < n = {n}; unobservable direction "
+            f"{np.round(unobs[:, 0], 4).tolist()}. Add a sensor that sees it, or remove that state from the model."
+        )
+
+
+# ----------------------------------------------------------------------------- separability
+
+
+@dataclass(frozen=True)
+class OutputSeparability:
+    """Output separability of a set of fault directions (Lemma 2.1.2, eq. 2.10).
+
+    Attributes
+    ----------
+    separable : bool
+        ``rank [C A^mu_1 f_1, ..., C A^mu_r f_r] == r``.
+    rank : int
+        That rank.
+    mu : tuple of int
+        Per fault, the smallest ``j`` with ``C A^j f_i != 0`` (eq. 2.15-2.16); -1 if none below n.
+    output_directions : NDArray
+        (m, r) unit columns ``C A^mu_i f_i``.
+    dependent : tuple of tuple of int
+        Fault indices whose output directions are linearly dependent on earlier ones.
+    """
+
+    separable: bool
+    rank: int
+    mu: tuple[int, ...]
+    output_directions: Array
+    dependent: tuple[tuple[int, ...], ...]
+
+
+def output_separability(A: NDArray, C: NDArray, F: NDArray, rtol: float = 1e-9) -> OutputSeparability:
+    """Check output separability of the columns of ``F`` (Lemma 2.1.2).
+
+    Parameters
+    ----------
+    A : (n, n) array
+    C : (m, n) array
+    F : (n, r) array
+        Fault directions as columns.
+    rtol : float
+        Relative rank tolerance.
+    """
+    A, C = np.asarray(A, float), np.asarray(C, float)
+    F = np.asarray(F, float).reshape(A.shape[0], -1)
+    n = A.shape[0]
+    scale = max(np.linalg.norm(C, 2), 1e-300)
+    mus, dirs = [], []
+    for i in range(F.shape[1]):
+        f, mu = F[:, i], -1
+        fj = f.copy()
+        for j in range(n):
+            if np.linalg.norm(C @ fj) > rtol * scale * max(np.linalg.norm(fj), 1e-300):
+                mu = j
+                break
+            fj = A @ fj
+        mus.append(mu)
+        cf = C @ fj if mu >= 0 else np.zeros(C.shape[0])
+        nrm = np.linalg.norm(cf)
+        dirs.append(cf / nrm if nrm > 0 else cf)
+    D = np.array(dirs).T if dirs else np.zeros((C.shape[0], 0))
+    dep: list[tuple[int, ...]] = []
+    for i in range(D.shape[1]):
+        if _rank(D[:, : i + 1], 1e-7) < _rank(D[:, :i], 1e-7) + 1:
+            partners = tuple(j for j in range(i) if angle_rad(D[:, i], D[:, j]) < 1e-4) or tuple(range(i))
+            dep.append((*partners, i))
+    r = _rank(D, 1e-7)
+    return OutputSeparability(r == F.shape[1] and all(m >= 0 for m in mus), r, tuple(mus), D, tuple(dep))
+
+
+# ----------------------------------------------------------------------------- detection space
+
+
+@dataclass(frozen=True)
+class DetectionSpace:
+    """Detection space of one fault direction (Definitions 2.1.2-2.1.6).
+
+    Attributes
+    ----------
+    f : NDArray
+        (n,) the fault direction as given.
+    basis : NDArray
+        (n, k) orthonormal basis of ``D_f = N(M)``, eq. 2.36 and Definition 2.1.3.
+    completion : NDArray
+        (n, n-k) orthonormal basis of the completion space (row space of ``M``, Definition 2.1.4).
+    order : int
+        Detection order k (Definition 2.1.5).
+    mu : int
+        Smallest ``j`` with ``C A^j f != 0`` (eq. 2.15-2.16).
+    generator : NDArray
+        (n,) maximal detection generator ``g``: ``C A^j g = 0`` for ``j < k-1`` (eq. 2.11),
+        ``C A^(k-1) g != 0`` (eq. 2.12), ``f = sum alpha_j A^(j-1) g`` with ``alpha_(k-mu) = 1``
+        (eq. 2.19-2.20).
+    alpha : NDArray
+        (k,) the coefficients ``alpha_1..alpha_k`` of eq. 2.14.
+    output_direction : NDArray
+        (m,) unit vector ``C A^mu f`` (eq. 2.27): every residual of this fault lies on it.
+    """
+
+    f: Array
+    basis: Array
+    completion: Array
+    order: int
+    mu: int
+    generator: Array
+    alpha: Array
+    output_direction: Array
+
+
+def detection_space(A: NDArray, C: NDArray, f: NDArray, name: str = "f", rtol: float = 1e-9) -> DetectionSpace:
+    """Detection space, completion space and detection generator of ``f`` (App. A, eq. 2.11-2.37).
+
+    ``C' = (I - Cf (Cf)^+) C`` (eq. 2.34), ``K' = A - A f (Cf)^+ C`` (eq. 2.37) and
+    ``D_f = N([C'; C'K'; ...; C'K'^(n-1)])`` (eq. 2.36, Definition 2.1.3); with ``C f = 0`` the
+    patent's rule applies: ``f`` is replaced by ``A^mu f`` in ``C f`` (eq. 2.27-2.28).
+
+    Parameters
+    ----------
+    A : (n, n) array
+    C : (m, n) array
+    f : (n,) array
+        Fault direction.
+    name : str
+        Used in error messages.
+    rtol : float
+        Relative rank tolerance.
+
+    Raises
+    ------
+    DesignError
+        ``(A, C)`` unobservable, or ``C A^j f = 0`` for all j (the fault never reaches the outputs).
+    """
+    A, C = np.asarray(A, float), np.asarray(C, float)
+    f = np.asarray(f, float).reshape(-1)
+    n = A.shape[0]
+    check_observable(A, C, rtol)
+    sep = output_separability(A, C, f[:, None], rtol)
+    mu = sep.mu[0]
+    if mu < 0:
+        raise DesignError(f"fault {name!r}: C A^j f = 0 for every j < n; the fault is invisible at the outputs.")
+    fmu = np.linalg.matrix_power(A, mu) @ f
+    cf = C @ fmu
+    cf_pinv = _pinv_col(cf[:, None])  # (Cf)^+ = ((Cf)'Cf)^-1 (Cf)'   (Lemma 2.1.5)
+    Cp = (np.eye(C.shape[0]) - cf[:, None] @ cf_pinv) @ C  # C' (eq. 2.34)
+    Kp = A - (A @ fmu)[:, None] @ cf_pinv @ C  # K' (eq. 2.37)
+    M = observability_matrix(Kp, Cp)  # eq. 2.36
+    D = null_basis(M, rtol)
+    k = D.shape[1]
+    if k == 0:
+        raise DesignError(f"fault {name!r}: empty detection space (numerical rank of M is n); check the model scaling.")
+    completion = null_basis(D.T)
+    # detection generator: g in D_f with C A^j g = 0, j < k-1 (eq. 2.11)
+    if k > 1:
+        Z = null_basis(observability_matrix(A, C)[: C.shape[0] * (k - 1)] @ D, 1e-7)
+        if Z.shape[1] != 1:
+            raise DesignError(
+                f"fault {name!r}: detection space of order {k} has no unique generator ({Z.shape[1]} candidates); "
+                "the fault is not a single-generator (Beard) direction."
+            )
+        g = D @ Z[:, 0]
+    else:
+        g = D[:, 0].copy()
+    Kg = np.column_stack([np.linalg.matrix_power(A, j) @ g for j in range(k)])
+    alpha, *_ = np.linalg.lstsq(Kg, f, rcond=None)  # f = sum alpha_j A^(j-1) g   (eq. 2.14)
+    resid = np.linalg.norm(Kg @ alpha - f)
+    if resid > 1e-6 * max(np.linalg.norm(f), 1e-300):
+        raise DesignError(
+            f"fault {name!r}: f is not in the span of its generator's Krylov vectors (residual {resid:.3g}); "
+            "the detection space is ill-conditioned, rescale the states."
+        )
+    lead = alpha[k - mu - 1]  # alpha_(k-mu) in the patent's 1-based numbering (eq. 2.18)
+    g, alpha = g * lead, alpha / lead
+    out = C @ np.linalg.matrix_power(A, mu) @ f
+    return DetectionSpace(f, D, completion, k, mu, g, alpha, out / np.linalg.norm(out))
+
+
+# ----------------------------------------------------------------------------- gain
+
+
+@dataclass(frozen=True)
+class BeardJonesDesign:
+    """A Beard-Jones detection gain and everything it was checked against.
+
+    Attributes
+    ----------
+    L : NDArray
+        (n, m) detection gain.
+    A_cl : NDArray
+        ``A - L C``.
+    poles : NDArray
+        Eigenvalues of ``A - L C`` (model domain: s [1/s] or z [-]).
+    names : tuple of str
+        Fault hypothesis names, in column order of ``F``.
+    F : NDArray
+        (n, r) fault directions used in the design.
+    spaces : tuple of DetectionSpace
+        One per fault.
+    output_directions : NDArray
+        (m, r) unit output directions ``C A^mu f_i``.
+    detection_poles : tuple of NDArray
+        Poles assigned on each detection space.
+    completion_poles : NDArray
+        Poles assigned on the completion space.
+    fixed_poles : NDArray
+        Eigenvalues the gain cannot move (they are stable, or the design would have raised).
+    L_detection : NDArray
+        The part ``L_i`` of eq. 2.44 (generalised), before the completion gain.
+    L_completion : NDArray
+        The part ``L_p C_i`` of eq. 2.50, written as an (n, m) gain.
+    discrete : bool
+        True if the poles are z-plane poles.
+    max_direction_error_rad : float
+        Largest angle between ``C (A-LC)^j D_i`` and the output direction of fault i [rad]
+        (0 for an exact design).
+    """
+
+    L: Array
+    A_cl: Array
+    poles: NDArray[np.complex128]
+    names: tuple[str, ...]
+    F: Array
+    spaces: tuple[DetectionSpace, ...]
+    output_directions: Array
+    detection_poles: tuple[NDArray[np.complex128], ...]
+    completion_poles: NDArray[np.complex128]
+    fixed_poles: NDArray[np.complex128]
+    L_detection: Array
+    L_completion: Array
+    discrete: bool
+    max_direction_error_rad: float
+
+
+def _sorted(p: NDArray) -> NDArray[np.complex128]:
+    p = np.asarray(p, dtype=complex).reshape(-1)
+    return p[np.lexsort((p.imag, p.real))]
+
+
+def _remove_assigned(all_poles: NDArray, assigned: NDArray) -> NDArray[np.complex128]:
+    """The poles of ``all_poles`` left after removing the closest match of each ``assigned`` pole."""
+    rest = list(np.asarray(all_poles, complex))
+    for p in np.asarray(assigned, complex):
+        if not rest:
+            break
+        j = int(np.argmin([abs(q - p) for q in rest]))
+        rest.pop(j)
+    return np.array(rest, dtype=complex)
+
+
+def _place(A: Array, B: Array, poles: NDArray, what: str) -> Array:
+    """``K`` with ``eig(A - B K) = poles`` (scipy ``place_poles``), with a checked result."""
+    poles = np.asarray(poles, dtype=complex)
+    if A.shape[0] == 0:
+        return np.zeros((B.shape[1], 0))
+    try:
+        res = place_poles(A, B, poles, method="YT", maxiter=200)
+    except ValueError as exc:
+        raise DesignError(f"cannot place the {what} poles {np.round(poles, 4).tolist()}: {exc}") from exc
+    got = np.linalg.eigvals(A - B @ res.gain_matrix)
+    err = np.max([np.min(np.abs(got - p)) for p in poles]) if poles.size else 0.0
+    if err > 1e-6 * max(1.0, np.max(np.abs(poles))):
+        raise DesignError(f"placing the {what} poles failed: wanted {np.round(poles, 4).tolist()}, got {np.round(got, 4).tolist()}")
+    return res.gain_matrix
+
+
+def beard_jones_gain(
+    A: NDArray,
+    C: NDArray,
+    F: NDArray,
+    detection_poles: Sequence[Sequence[complex] | complex],
+    completion_poles: Sequence[complex],
+    names: Sequence[str] | None = None,
+    discrete: bool = False,
+    allow_shift: bool = False,
+    rtol: float = 1e-9,
+) -> BeardJonesDesign:
+    """Detection gain for one or several output-separable faults (App. A, Lemmas 2.1.4-2.1.7).
+
+    For each fault ``f_i`` with orthonormal detection-space basis ``D_i`` and rank-one output map
+    ``C D_i = c_i w_i'`` the closed loop on ``D_i`` is ``Lambda_i = D_i'A D_i - kappa_i w_i'``
+    with ``kappa_i`` placing ``detection_poles[i]`` (eq. 2.23-2.24); then
+    ``L c_i = v_i = (A D_i - D_i Lambda_i) w_i / |w_i|^2`` (eq. 2.39 with ``f`` -> ``D_i``), so
+    ``L_0 = V (CF)^+`` (eq. 2.44, 2.30), ``A_i = A - L_0 C`` (eq. 2.46), ``C_i = (I - CF (CF)^+) C``
+    (eq. 2.45), and the completion gain places the observable part of ``(A_i, C_i)``;
+    ``L = L_0 + L_p (I - CF (CF)^+)`` (eq. 2.50). The free part of ``L_p`` along the unobservable
+    (detection) directions is set to zero (minimum norm); the patent's MATLAB ``place`` picked
+    another member of the same family (eq. 2.51), with the same poles and detection space.
+
+    Parameters
+    ----------
+    A : (n, n) array
+    C : (m, n) array
+    F : (n, r) array
+        Fault directions (columns).
+    detection_poles : sequence
+        Per fault, ``k_i`` poles (k_i = detection order; a scalar is accepted for k_i = 1).
+    completion_poles : sequence
+        The ``n - sum(k_i) - n_fixed`` remaining poles.
+    names : sequence of str, optional
+        Fault names (default ``f0, f1, ...``).
+    discrete : bool
+        Poles are z-plane poles (stability = inside the unit circle).
+    allow_shift : bool
+        Accept a fault with ``C f = 0`` by using ``C A^mu f`` as its output direction (eq. 2.27-2.28;
+        the detection order is then at least ``mu + 1``). If False such a fault raises.
+    rtol : float
+        Relative rank tolerance.
+
+    Raises
+    ------
+    DesignError
+        Unobservable ``(A, C)``; faults not output separable (with the ``A^k f`` suggestion);
+        wrong number of poles; detection spaces not independent; an unassignable pole unstable.
+    """
+    A, C = np.asarray(A, float), np.asarray(C, float)
+    n, m = A.shape[0], C.shape[0]
+    F = np.asarray(F, float).reshape(n, -1)
+    r = F.shape[1]
+    names = tuple(names) if names is not None else tuple(f"f{i}" for i in range(r))
+    if len(names) != r:
+        raise DesignError(f"{len(names)} names for {r} fault directions")
+    if len(detection_poles) != r:
+        raise DesignError(f"detection_poles has {len(detection_poles)} entries for {r} faults; give one list per fault")
+    check_observable(A, C, rtol)
+    sep = output_separability(A, C, F, rtol)
+    for i, mu in enumerate(sep.mu):
+        if mu < 0:
+            raise DesignError(f"fault {names[i]!r}: C A^j f = 0 for every j < n; no sensor ever sees it. Add a sensor.")
+        if mu > 0 and not allow_shift:
+            raise DesignError(
+                f"fault {names[i]!r} is not output separable: C f = 0 (Lemma 2.1.2); use A^{mu} f = "
+                f"{np.round(np.linalg.matrix_power(A, mu) @ F[:, i], 4).tolist()} as its output-side direction "
+                "(the patent's A^k f replacement, allow_shift=True), or add a sensor that sees it."
+            )
+    if not sep.separable:
+        groups = ", ".join("{" + ", ".join(names[j] for j in grp) + "}" for grp in sep.dependent)
+        raise DesignError(
+            f"faults {groups} are not output separable: rank [C f_1 ... C f_r] = {sep.rank} < {r} (Lemma 2.1.2). "
+            "Design a bank of filters (plan_bank), or replace one direction by A^j f (j > 0) as the patent suggests."
+        )
+    spaces = tuple(detection_space(A, C, F[:, i], names[i], rtol) for i in range(r))
+    Dall = np.hstack([s.basis for s in spaces])
+    if _rank(Dall, 1e-7) < Dall.shape[1]:
+        raise DesignError(
+            f"the detection spaces of {', '.join(names)} intersect (rank {_rank(Dall, 1e-7)} < {Dall.shape[1]}); "
+            "they cannot be assigned in one filter: use a bank of filters (plan_bank)."
+        )
+    det_poles: list[NDArray[np.complex128]] = []
+    cols_c, cols_v = [], []
+    for i, sp in enumerate(spaces):
+        p = np.atleast_1d(np.asarray(detection_poles[i], dtype=complex))
+        if p.size != sp.order:
+            raise DesignError(
+                f"fault {names[i]!r} has detection order {sp.order}; give exactly {sp.order} detection pole(s), got {p.size}"
+            )
+        D = sp.basis
+        u_, s_, vt_ = np.linalg.svd(C @ D, full_matrices=False)  # C D = c w' (rank one)
+        c, w = u_[:, 0], s_[0] * vt_[0]
+        Lam0 = D.T @ A @ D
+        # (I - D D') A D must be rank one along w': the detection space is (A, C)-invariant off w
+        off = (np.eye(n) - D @ D.T) @ A @ D
+        Pw = np.eye(sp.order) - np.outer(w, w) / (w @ w)
+        if np.linalg.norm(off @ Pw) > 1e-7 * max(1.0, np.linalg.norm(A)):
+            raise DesignError(f"fault {names[i]!r}: detection space is not invariant off the output direction; rescale the model")
+        if sp.order == 1:
+            Lam = np.array([[p[0].real]])
+            if abs(p[0].imag) > 0:
+                raise DesignError(f"fault {names[i]!r}: a detection order of 1 needs a real pole, got {p[0]}")
+        else:
+            kappa = _place(Lam0.T, w[:, None], p, f"detection ({names[i]})").T  # Lambda = Lam0 - kappa w'
+            Lam = Lam0 - kappa @ w[None, :]
+        v = (A @ D - D @ Lam) @ w / (w @ w)  # L c = v   (eq. 2.39 with f -> D_f, eq. 2.24)
+        cols_c.append(c)
+        cols_v.append(v)
+        det_poles.append(_sorted(p))
+    CF = np.column_stack(cols_c)
+    V = np.column_stack(cols_v)
+    CFp = np.linalg.pinv(CF)
+    L0 = V @ CFp  # eq. 2.44 / 2.30 with E = 0
+    Ai = A - L0 @ C  # eq. 2.46
+    Proj = np.eye(m) - CF @ CFp
+    Ci = Proj @ C  # eq. 2.45
+    U = null_basis(observability_matrix(Ai, Ci), rtol)  # unobservable subspace, contains every D_i
+    O = null_basis(U.T) if U.shape[1] else np.eye(n)
+    n_obs = O.shape[1]
+    Vr = range_basis(Proj)  # orthonormal basis of the remaining output directions
+    comp = np.asarray(completion_poles, dtype=complex).reshape(-1)
+    if comp.size != n_obs:
+        raise PoleCountError(
+            f"{comp.size} completion pole(s) given; this design can place exactly {n_obs} "
+            f"(n = {n}, detection orders {[s.order for s in spaces]}, {U.shape[1] - sum(s.order for s in spaces)} fixed)",
+            n_obs,
+        )
+    if n_obs:
+        A11, C1 = O.T @ Ai @ O, Vr.T @ Ci @ O
+        Lo = _place(A11.T, C1.T, comp, "completion").T  # eig(A11 - Lo C1) = completion poles
+        Lc = O @ Lo @ Vr.T  # L_p (I - CF CF^+) of eq. 2.50, in (n, m) form
+    else:
+        Lc = np.zeros((n, m))
+    L = L0 + Lc
+    Acl = A - L @ C
+    poles = np.linalg.eigvals(Acl)
+    assigned = np.concatenate([*det_poles, comp]) if comp.size else np.concatenate(det_poles)
+    fixed = _remove_assigned(poles, assigned)
+    if fixed.size and not _is_stable(fixed, discrete):
+        raise DesignError(
+            f"faults {', '.join(names)} leave unassignable unstable pole(s) {np.round(fixed, 4).tolist()}; "
+            "these directions are not mutually detectable in one filter: use a bank of filters (plan_bank)."
+        )
+    err = _direction_error(Acl, C, spaces, CF)
+    if err > 1e-5:
+        raise DesignError(f"design check failed: residual direction error {err:.3g} rad (expected 0); rescale the model")
+    return BeardJonesDesign(
+        L, Acl, _sorted(poles), names, F, spaces, CF, tuple(det_poles), _sorted(comp), _sorted(fixed), L0, Lc, discrete, err
+    )
+
+
+def _direction_error(Acl: Array, C: Array, spaces: Sequence[DetectionSpace], CF: Array) -> float:
+    """Largest angle between ``C Acl^j x`` (x in D_i, j < n) and the fault's output direction [rad]."""
+    n = Acl.shape[0]
+    worst = 0.0
+    for i, sp in enumerate(spaces):
+        X = sp.basis
+        for _ in range(n):
+            Y = C @ X
+            for col in Y.T:
+                if np.linalg.norm(col) > 1e-9 * max(1.0, np.linalg.norm(C) * np.linalg.norm(X)):
+                    worst = max(worst, angle_rad(col, CF[:, i]))
+            X = Acl @ X
+            X = X / max(np.linalg.norm(X), 1e-300)
+    return worst
+
+
+# ----------------------------------------------------------------------------- runtime filter
+
+
+@dataclass(frozen=True)
+class DetectionFilterDesign:
+    """A discrete detection filter ready to run, from :func:`design_detection_filter`.
+
+    Attributes
+    ----------
+    model : LinearModel
+        The discrete model the filter runs on.
+    gain : BeardJonesDesign
+        The gain design (z-plane poles).
+    S : NDArray
+        (m, m) steady-state residual covariance for the given noise (identity if none given).
+    """
+
+    model: LinearModel
+    gain: BeardJonesDesign
+    S: Array
+
+
+def fault_directions_from_model(model: LinearModel, faults: Sequence[str] | Mapping[str, Sequence[float]]) -> tuple[tuple[str, ...], Array]:
+    """Fault directions of a model: input names give ``B[:, j]`` (actuator faults), a mapping gives columns.
+
+    Parameters
+    ----------
+    model : LinearModel
+    faults : sequence of input names, or mapping name -> (n,) direction in the model's state coordinates
+    """
+    n = model.n_states
+    if isinstance(faults, Mapping):
+        names = tuple(faults)
+        F = np.column_stack([np.asarray(faults[k], float).reshape(n) for k in names]) if names else np.zeros((n, 0))
+        return names, F
+    cols = []
+    for name in faults:
+        if name not in model.input_names:
+            raise DesignError(f"fault {name!r} is not an input of the model; inputs are {list(model.input_names)}")
+        cols.append(np.asarray(model.B)[:, model.input_names.index(name)])
+    return tuple(faults), (np.column_stack(cols) if cols else np.zeros((n, 0)))
+
+
+def _discretize_direction(A: Array, f: Array, dt_s: float) -> Array:
+    """``int_0^dt e^(A t) dt f``: how a constant fault of direction f enters a ZOH model."""
+    n = A.shape[0]
+    blk = np.zeros((n + 1, n + 1))
+    blk[:n, :n], blk[:n, n] = A * dt_s, f * dt_s
+    return sla.expm(blk)[:n, n]
+
+
+def spread_poles(base: complex, count: int, step: float = 0.15) -> NDArray[np.complex128]:
+    """``count`` distinct real poles ``base * (1 + step j)``, j = 0..count-1 (place_poles needs distinct poles)."""
+    return np.array([base * (1.0 + step * j) for j in range(count)], dtype=complex)
+
+
+def design_detection_filter(
+    model: LinearModel,
+    faults: Sequence[str] | Mapping[str, Sequence[float]],
+    detection_pole_radps: float = -4.0,
+    completion_pole_radps: float = -6.0,
+    dt_s: float | None = None,
+    Q: NDArray | None = None,
+    R: NDArray | None = None,
+    allow_shift: bool = False,
+) -> DetectionFilterDesign:
+    """Design a discrete detection filter for ``faults`` on ``model`` (one filter, all faults).
+
+    Continuous poles ``s`` are mapped to ``z = exp(s dt)``; detection poles are spread
+    (:func:`spread_poles`) over each detection order, completion poles over the rest.
+
+    Parameters
+    ----------
+    model : LinearModel
+        Continuous (needs ``dt_s``) or discrete.
+    faults : sequence or mapping
+        Input names (actuator faults, direction ``B[:, j]``) or name -> continuous-time direction.
+    detection_pole_radps, completion_pole_radps : float
+        Continuous-time pole locations [1/s], negative.
+    dt_s : float, optional
+        Sample time [s] for a continuous model.
+    Q : (n, n) array, optional
+        Discrete process-noise covariance per step (for the residual covariance ``S``).
+    R : (m, m) array, optional
+        Measurement-noise covariance.
+    allow_shift : bool
+        Passed to :func:`beard_jones_gain` (faults with ``C f = 0``).
+    """
+    if detection_pole_radps >= 0 or completion_pole_radps >= 0:
+        raise DesignError("detection_pole_radps and completion_pole_radps must be negative [1/s]")
+    names, Fc = fault_directions_from_model(model, faults)
+    if model.is_discrete:
+        dmodel, F = model, Fc
+        dt = model.dt_s
+    else:
+        if dt_s is None or dt_s <= 0:
+            raise DesignError("a continuous model needs dt_s > 0 to run as a discrete detection filter")
+        dmodel = model.discretize(dt_s)
+        F = np.column_stack([_discretize_direction(np.asarray(model.A), Fc[:, i], dt_s) for i in range(Fc.shape[1])])
+        dt = dt_s
+    A, C = np.asarray(dmodel.A), np.asarray(dmodel.C)
+    spaces = [detection_space(A, C, F[:, i], names[i]) for i in range(F.shape[1])]
+    det = [np.exp(spread_poles(detection_pole_radps * (1 + 0.05 * i), sp.order) * dt) for i, sp in enumerate(spaces)]
+    # count completion poles: try the full count, let the design report the exact number
+    n_comp = A.shape[0] - sum(sp.order for sp in spaces)
+    comp = np.exp(spread_poles(completion_pole_radps, n_comp) * dt)
+    try:
+        gain = beard_jones_gain(A, C, F, det, comp, names, discrete=True, allow_shift=allow_shift)
+    except PoleCountError as exc:
+        n_can = exc.n_placeable
+        gain = beard_jones_gain(
+            A, C, F, det, np.exp(spread_poles(completion_pole_radps, n_can) * dt), names, discrete=True, allow_shift=allow_shift
+        )
+    S = residual_covariance(gain.A_cl, C, gain.L, Q, R)
+    return DetectionFilterDesign(dmodel, gain, S)
+
+
+def residual_covariance(Acl: Array, C: Array, L: Array, Q: NDArray | None, R: NDArray | None) -> Array:
+    """Steady-state covariance of the residual ``r = C e + v`` of a discrete observer.
+
+    ``P = Acl P Acl' + Q + L R L'`` (discrete Lyapunov), ``S = C P C' + R``; identity if no noise is given.
+    """
+    n, m = Acl.shape[0], C.shape[0]
+    if Q is None and R is None:
+        return np.eye(m)
+    Qm = np.zeros((n, n)) if Q is None else np.asarray(Q, float)
+    Rm = np.zeros((m, m)) if R is None else np.asarray(R, float)
+    if not _is_stable(np.linalg.eigvals(Acl), True):
+        raise DesignError("residual covariance needs a stable filter (|z| < 1)")
+    P = sla.solve_discrete_lyapunov(Acl, Qm + L @ Rm @ L.T)
+    S = C @ P @ C.T + Rm
+    S = 0.5 * (S + S.T)
+    if np.min(np.linalg.eigvalsh(S)) <= 0:
+        raise DesignError("residual covariance is singular: give a measurement-noise covariance R > 0")
+    return S
+
+
+class BeardJonesFilter:
+    """A running Beard-Jones detection filter (``reset(rng)`` / ``step(t_s, u, y)``).
+
+    ``r(k) = y(k) - C xh(k) - D u(k)``, ``xh(k+1) = A xh(k) + B u(k) + L r(k)`` (eq. 2.3-2.4 in
+    discrete form, deviations from trim). The statistic is ``r' S^-1 r`` against the chi-square
+    threshold at ``alpha``; isolation is by the angle between ``r`` and each output direction
+    ``C f_i`` (the patent's phi_e), accepted below ``max_angle_rad``.
+
+    Parameters
+    ----------
+    design : DetectionFilterDesign
+    alpha : float
+        Per-sample false-alarm probability of the chi-square threshold (Gaussian residual).
+    max_angle_rad : float
+        Largest residual angle [rad] accepted for isolation.
+    id : str
+        Registry id.
+    """
+
+    def __init__(self, design: DetectionFilterDesign, alpha: float = 1e-3, max_angle_rad: float = 0.35, id: str = "beard-jones-v1") -> None:
+        if not 0.0 < alpha < 1.0:
+            raise DesignError(f"alpha must be in (0, 1), got {alpha}")
+        self.design, self.alpha, self.max_angle_rad, self.id = design, alpha, max_angle_rad, id
+        self.hypotheses: tuple[str, ...] = design.gain.names
+        md = design.model
+        self._A, self._B, self._C, self._D = (np.asarray(M, float) for M in (md.A, md.B, md.C, md.D))
+        self._L = design.gain.L
+        self._u0, self._y0 = np.asarray(md.u0), np.asarray(md.y0)
+        self._Sinv = np.linalg.inv(design.S)
+        self._dirs = design.gain.output_directions
+        self.threshold = float(chi2.ppf(1.0 - alpha, md.n_outputs))
+        self._x = np.zeros(md.n_states)
+
+    def reset(self, rng: np.random.Generator | None = None) -> None:
+        """Zero the state estimate (the filter is deterministic; ``rng`` is unused)."""
+        self._x = np.zeros(self._A.shape[0])
+
+    def step(self, t_s: float, u: NDArray, y: NDArray) -> Residual:
+        """One sample: time [s], absolute inputs ``u`` and measurements ``y`` in model order."""
+        du = np.asarray(u, float) - self._u0
+        dy = np.asarray(y, float) - self._y0
+        r = dy - self._C @ self._x - self._D @ du  # r = y - C xh - D u
+        self._x = self._A @ self._x + self._B @ du + self._L @ r  # xh+ = A xh + B u + L r
+        stat = float(r @ self._Sinv @ r)
+        scores = np.array([angle_rad(r, self._dirs[:, i]) for i in range(self._dirs.shape[1])])
+        alarm = stat > self.threshold
+        iso = None
+        if alarm and scores.size and np.nanmin(scores) < self.max_angle_rad:
+            iso = self.hypotheses[int(np.nanargmin(scores))]
+        return Residual(t_s, r, stat, self._C.shape[0], self.threshold, alarm, iso, scores)
+
+
+def plan_bank(
+    model: LinearModel,
+    faults: Sequence[str] | Mapping[str, Sequence[float]],
+    detection_pole_radps: float = -4.0,
+    completion_pole_radps: float = -6.0,
+    dt_s: float | None = None,
+    Q: NDArray | None = None,
+    R: NDArray | None = None,
+) -> list[DetectionFilterDesign]:
+    """Group faults greedily into as few filters as the theory allows.
+
+    A fault joins the first group with which one filter can still be designed (output separable,
+    independent detection spaces, stable unassignable poles); otherwise it starts a new group.
+    A fault that cannot be designed even alone raises its own :class:`DesignError`.
+    """
+    names, _ = fault_directions_from_model(model, faults)
+    sub = (lambda keys: {k: faults[k] for k in keys}) if isinstance(faults, Mapping) else (lambda keys: list(keys))
+    groups: list[list[str]] = []
+    designs: list[DetectionFilterDesign] = []
+    for name in names:
+        for gi, grp in enumerate(groups):
+            try:
+                d = design_detection_filter(model, sub([*grp, name]), detection_pole_radps, completion_pole_radps, dt_s, Q, R)
+            except DesignError:
+                continue
+            grp.append(name)
+            designs[gi] = d
+            break
+        else:
+            designs.append(design_detection_filter(model, sub([name]), detection_pole_radps, completion_pole_radps, dt_s, Q, R))
+            groups.append([name])
+    return designs
+
+
+class BeardJonesBank:
+    """A bank of Beard-Jones filters run side by side (faults that cannot share one filter).
+
+    The statistic is ``max_j stat_j / threshold_j`` against 1; scores are each hypothesis's angle
+    in its own filter; isolation comes from the filter with the largest normalized statistic.
+    """
+
+    def __init__(self, filters: Sequence[BeardJonesFilter], id: str = "beard-jones-bank-v1") -> None:
+        if not filters:
+            raise DesignError("a bank needs at least one filter")
+        self.filters, self.id = list(filters), id
+        self.hypotheses: tuple[str, ...] = tuple(h for f in self.filters for h in f.hypotheses)
+
+    def reset(self, rng: np.random.Generator | None = None) -> None:
+        """Reset every filter."""
+        for f in self.filters:
+            f.reset(rng)
+
+    def step(self, t_s: float, u: NDArray, y: NDArray) -> Residual:
+        """Step every filter on the same sample."""
+        res = [f.step(t_s, u, y) for f in self.filters]
+        ratios = np.array([r.statistic / r.threshold for r in res])
+        j = int(np.argmax(ratios))
+        scores = np.concatenate([r.scores for r in res if r.scores is not None])
+        alarm = bool(ratios[j] > 1.0)
+        return Residual(t_s, np.concatenate([r.r for r in res]), float(ratios[j]), 0, 1.0, alarm, res[j].isolation if alarm else None, scores)
