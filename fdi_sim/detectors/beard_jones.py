@@ -697,7 +697,8 @@ class BeardJonesFilter:
     ``r(k) = y(k) - C xh(k) - D u(k)``, ``xh(k+1) = A xh(k) + B u(k) + L r(k)`` (eq. 2.3-2.4 in
     discrete form, deviations from trim). The statistic is ``r' S^-1 r`` against the chi-square
     threshold at ``alpha``; isolation is by the angle between ``r`` and each output direction
-    ``C f_i`` (the patent's phi_e), accepted below ``max_angle_rad``.
+    ``C f_i`` (the patent's phi_e), both whitened by ``S^-1/2`` so mixed units weigh by their noise
+    (a linear map keeps a fixed direction fixed), accepted below ``max_angle_rad``.
 
     Parameters
     ----------
@@ -720,7 +721,8 @@ class BeardJonesFilter:
         self._L = design.gain.L
         self._u0, self._y0 = np.asarray(md.u0), np.asarray(md.y0)
         self._Sinv = np.linalg.inv(design.S)
-        self._dirs = design.gain.output_directions
+        self._W = np.linalg.inv(np.linalg.cholesky(design.S))  # angles in whitened (S^-1/2) coordinates
+        self._dirs = self._W @ design.gain.output_directions
         self.threshold = float(chi2.ppf(1.0 - alpha, md.n_outputs))
         self._x = np.zeros(md.n_states)
 
@@ -735,7 +737,8 @@ class BeardJonesFilter:
         r = dy - self._C @ self._x - self._D @ du  # r = y - C xh - D u
         self._x = self._A @ self._x + self._B @ du + self._L @ r  # xh+ = A xh + B u + L r
         stat = float(r @ self._Sinv @ r)
-        scores = np.array([angle_rad(r, self._dirs[:, i]) for i in range(self._dirs.shape[1])])
+        rw = self._W @ r
+        scores = np.array([angle_rad(rw, self._dirs[:, i]) for i in range(self._dirs.shape[1])])
         alarm = stat > self.threshold
         iso = None
         if alarm and scores.size and np.nanmin(scores) < self.max_angle_rad:
