@@ -37,6 +37,7 @@ from fdi_sim.flightlog.schemas import (
     TOPIC_FAULTS,
     TOPIC_FDI_ALARMS,
     TOPIC_FDI_FAILURE_LOG,
+    TOPIC_OPERATING_POINT,
     TOPIC_SENSORS,
     TOPIC_SIM_STATUS,
     TOPIC_SURFACES,
@@ -51,7 +52,7 @@ from fdi_sim.flightlog.writer import EventChannel, FlightLogWriter, VectorChanne
 
 __all__ = [
     "ALARM_JSON_SCHEMA", "FAILURE_LOG_JSON_SCHEMA", "METADATA_SCENARIO", "STATUS_JSON_SCHEMA",
-    "TOPIC_COMMANDS", "TOPIC_FAULTS", "TOPIC_FDI_ALARMS", "TOPIC_FDI_FAILURE_LOG", "TOPIC_SENSORS",
+    "TOPIC_COMMANDS", "TOPIC_FAULTS", "TOPIC_FDI_ALARMS", "TOPIC_FDI_FAILURE_LOG", "TOPIC_OPERATING_POINT", "TOPIC_SENSORS",
     "TOPIC_SIM_STATUS", "TOPIC_SURFACES", "TOPIC_TRUTH_STATE",
     "Event", "EventChannel", "EventSchema", "EventTopic", "FlightLog", "FlightLogWriter", "LogInfo",
     "RawTopic", "RepairReport", "TopicData", "TopicInfo", "VectorChannel", "VectorSchema", "VectorTopic",

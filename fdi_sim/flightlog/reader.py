@@ -24,13 +24,14 @@ from fdi_sim.errors import LogError
 from fdi_sim.flightlog.schemas import (
     CDR_BE_HEADER,
     CDR_LE_HEADER,
+    MCAP_MAGIC,
     MESSAGE_ENCODING_CDR,
     MESSAGE_ENCODING_JSON,
     METADATA_SCENARIO,
     SCHEMA_ENCODING_ROS2MSG,
+    message_dtype,
     parse_ros2msg_float64,
 )
-from fdi_sim.flightlog.writer import MCAP_MAGIC, message_dtype
 from fdi_sim.units import NS_PER_S
 
 _OP_FOOTER, _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX = 0x02, 0x05, 0x06, 0x07

@@ -17,7 +17,8 @@ from pathlib import Path
 
 from fdi_sim.errors import LogError
 from fdi_sim.flightlog.reader import parse_chunk, scan_records
-from fdi_sim.flightlog.writer import MCAP_MAGIC, McapFileWriter, RawMessage, build_chunk
+from fdi_sim.flightlog.schemas import MCAP_MAGIC, RawMessage, build_chunk
+from fdi_sim.flightlog.writer import McapFileWriter
 from fdi_sim.units import NS_PER_S
 
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05

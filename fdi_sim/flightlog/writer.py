@@ -1,21 +1,15 @@
 """Write the flight log: one MCAP file per run, flushed about once per simulated second.
 
-Design (measured, see ``tests/benchmarks/bench_flightlog.py``): the simulation loop calls
-:meth:`VectorChannel.write` ~6 times per 1/120 s step, so a write only validates and appends
-the row's bytes to a Python list (~0.5 us). Once per ``flush_period_s`` of *simulated* time the
-buffered rows of all channels become one MCAP chunk built with numpy in one shot: a packed
-structured array per channel whose rows are complete Message records (opcode, length, channel,
-sequence, log time, publish time, CDR header, float64 fields), interleaved in time order, then
-compressed, followed by one Message Index record per channel, then ``file.flush()``. A process
-killed with SIGKILL therefore loses at most one flush period; :func:`fdi_sim.flightlog.repair_log`
-rebuilds the summary of such a file. ``close()`` writes the summary (schemas, channels,
-statistics, chunk and metadata indexes) and the footer (MCAP spec, "Summary Section").
-
-The records follow the MCAP specification (https://mcap.dev/spec): a Message record is
-``opcode 0x05 | uint64 length | uint16 channel_id | uint32 sequence | uint64 log_time |
-uint64 publish_time | data``; a Message Index record is ``opcode 0x07 | uint64 length |
-uint16 channel_id | uint32 byte length of the entries | (uint64 log_time, uint64 offset)...``
-with offsets counted from the start of the chunk's uncompressed records.
+Design (measured with ``tests/benchmarks/bench_flightlog.py``): the simulation loop calls
+:meth:`VectorChannel.write` ~6 times per 1/120 s step, so a write only checks the time and
+appends the row's bytes to a list. Once per ``flush_period_s`` of *simulated* time the rows
+of all channels become one MCAP chunk built by numpy in one shot
+(:func:`fdi_sim.flightlog.schemas.build_chunk`: complete Message records interleaved in time
+order), compressed, followed by one Message Index record per channel, then ``file.flush()``.
+A process killed with SIGKILL therefore loses at most one flush period, and
+:func:`fdi_sim.flightlog.repair_log` rebuilds the summary of such a file. ``close()`` writes
+Data End, the summary (schemas, channels, statistics, chunk and metadata indexes, summary
+offsets) and the footer (MCAP specification, https://mcap.dev/spec, "Summary Section").
 """
 from __future__ import annotations
 
@@ -23,7 +17,6 @@ import math
 import struct
 import sys
 import zlib
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -33,259 +26,38 @@ from numpy.typing import NDArray
 from fdi_sim import __version__ as _FDI_SIM_VERSION
 from fdi_sim.errors import LogError
 from fdi_sim.flightlog.schemas import (
-    CDR_LE_HEADER,
+    MCAP_MAGIC,
     MESSAGE_ENCODING_CDR,
     MESSAGE_ENCODING_JSON,
     SCHEMA_ENCODING_JSONSCHEMA,
     SCHEMA_ENCODING_ROS2MSG,
+    ChunkPayload,
     EventSchema,
+    RawMessage,
+    VectorBlock,
     VectorSchema,
+    build_chunk,
     check_topic,
+    encode_message_index,
     event_schema,
     vector_schema,
 )
 from fdi_sim.units import NS_PER_S
 
-MCAP_MAGIC: bytes = b"\x89MCAP0\r\n"
 LIBRARY: str = f"fdi-sim {_FDI_SIM_VERSION} flightlog"
-#: zstd level: 1 compresses a chunk of flight data as well as the default 3 at ~25 % less
-#: time (bench_flightlog.py)
+#: zstd level: on a one-second chunk of flight data level 1 gives the same size as the
+#: library default 3 in ~40 % less time (bench_flightlog.py notes)
 ZSTD_LEVEL: int = 1
 #: log_time is uint64 ns; keep t_s far below its range (and below 2**53 ns for exact floats)
 MAX_T_S: float = 1.0e7
 
-_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
-_OP_CHUNK, _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX = 0x06, 0x07, 0x08
-_OP_STATISTICS, _OP_METADATA, _OP_METADATA_INDEX = 0x0B, 0x0C, 0x0D
-_OP_SUMMARY_OFFSET, _OP_DATA_END = 0x0E, 0x0F
-#: opcode, record length, channel_id, sequence, log_time, publish_time (22 bytes after the 9)
-_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
-_MESSAGE_FIXED = 2 + 4 + 8 + 8
+# MCAP opcodes (MCAP spec, "Records")
+_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL = 0x01, 0x02, 0x03, 0x04
+_OP_CHUNK, _OP_CHUNK_INDEX, _OP_STATISTICS = 0x06, 0x08, 0x0B
+_OP_METADATA, _OP_METADATA_INDEX, _OP_SUMMARY_OFFSET, _OP_DATA_END = 0x0C, 0x0D, 0x0E, 0x0F
 _LITTLE = sys.byteorder == "little"
-
-
-def message_dtype(n_fields: int) -> np.dtype:
-    """Packed numpy dtype of one complete MCAP Message record of a vector channel.
-
-    ``itemsize = 1 + 8 + 22 + 4 + 8 * n_fields`` (no padding: the record and the CDR payload
-    are both packed, see :mod:`fdi_sim.flightlog.schemas`).
-    """
-    return np.dtype([
-        ("opcode", "u1"), ("length", "<u8"), ("channel_id", "<u2"), ("sequence", "<u4"),
-        ("log_time", "<u8"), ("publish_time", "<u8"), ("cdr", "u1", (4,)),
-        ("values", "<f8", (n_fields,)),
-    ])
-
-
-@dataclass(frozen=True, eq=False)
-class VectorBlock:
-    """Rows of one vector channel for one chunk.
-
-    Attributes
-    ----------
-    channel_id : int
-        MCAP channel id.
-    first_sequence : int
-        Sequence number of the first row (per-channel message counter).
-    t_s : NDArray
-        Times [s], shape (n,).
-    values : NDArray
-        Values without ``t_s``, shape (n, n_fields - 1).
-    """
-
-    channel_id: int
-    first_sequence: int
-    t_s: NDArray[np.float64]
-    values: NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class RawMessage:
-    """One already-encoded message (events; messages recovered by repair).
-
-    Attributes
-    ----------
-    channel_id : int
-    sequence : int
-    log_time_ns : int
-        Log time = publish time [ns].
-    data : bytes
-        Encoded payload.
-    """
-
-    channel_id: int
-    sequence: int
-    log_time_ns: int
-    data: bytes
-
-
-@dataclass(frozen=True, eq=False)
-class ChunkPayload:
-    """The uncompressed records of one chunk and what its indexes need.
-
-    Attributes
-    ----------
-    records : bytes
-        Concatenated Message records, in log-time order.
-    message_start_ns, message_end_ns : int
-        Earliest and latest log time [ns].
-    message_count : int
-    index : dict
-        channel id -> (log_time_ns, offset) arrays, sorted by log time, offsets into ``records``.
-    """
-
-    records: bytes
-    message_start_ns: int
-    message_end_ns: int
-    message_count: int
-    index: dict[int, tuple[NDArray[np.uint64], NDArray[np.uint64]]]
-
-
-def vector_records(block: VectorBlock) -> NDArray[Any]:
-    """Complete Message records of one :class:`VectorBlock` as a packed structured array.
-
-    log_time = publish_time = round(t_s * 1e9) (round half to even, like Python's ``round``).
-    """
-    t = np.asarray(block.t_s, dtype=np.float64)
-    n, n_values = block.values.shape
-    rec = np.empty(n, dtype=message_dtype(n_values + 1))
-    rec["opcode"] = _OP_MESSAGE
-    rec["length"] = rec.dtype.itemsize - 9
-    rec["channel_id"] = block.channel_id
-    rec["sequence"] = (block.first_sequence + np.arange(n, dtype=np.uint64)) & 0xFFFFFFFF
-    log_ns = np.rint(t * NS_PER_S).astype(np.uint64)
-    rec["log_time"] = log_ns
-    rec["publish_time"] = log_ns
-    rec["cdr"] = np.frombuffer(CDR_LE_HEADER, dtype=np.uint8)
-    rec["values"][:, 0] = t
-    rec["values"][:, 1:] = block.values
-    return rec
-
-
-def build_chunk(blocks: Sequence[VectorBlock], raws: Sequence[RawMessage] = ()) -> ChunkPayload:
-    """Lay out the Message records of one chunk in log-time order and index them.
-
-    Vector rows are interleaved by time (ties: block order, then write order); when every
-    block has the same sorted time vector (the usual case: one row per channel per step) the
-    interleaving is one structured-array copy. Raw messages (events) are spliced in after the
-    vector messages of equal time.
-
-    Parameters
-    ----------
-    blocks : sequence of VectorBlock
-        At most one per channel.
-    raws : sequence of RawMessage
-        Already-encoded messages, any order.
-    """
-    recs = [vector_records(b) for b in blocks if len(b.t_s) > 0]
-    vbytes, vlog, voff, positions = _interleave(recs)
-    n_vec = len(vlog)
-    # raw messages, stably sorted by time, spliced after the vector messages of equal time
-    order = sorted(range(len(raws)), key=lambda i: raws[i].log_time_ns)
-    rlog = np.array([raws[i].log_time_ns for i in order], dtype=np.uint64)
-    rbytes = [_MESSAGE_HEAD.pack(_OP_MESSAGE, _MESSAGE_FIXED + len(raws[i].data), raws[i].channel_id,
-                                 raws[i].sequence & 0xFFFFFFFF, raws[i].log_time_ns,
-                                 raws[i].log_time_ns) + raws[i].data for i in order]
-    rsize = np.array([len(b) for b in rbytes], dtype=np.int64)
-    ins = np.searchsorted(vlog, rlog, side="right")
-    voff_ext = np.append(voff, len(vbytes)).astype(np.int64)
-    if rbytes:
-        view = memoryview(vbytes)
-        pieces: list[Any] = []
-        prev = 0
-        for j, i in enumerate(ins.tolist()):
-            pieces.append(view[voff_ext[prev]:voff_ext[i]])
-            pieces.append(rbytes[j])
-            prev = i
-        pieces.append(view[voff_ext[prev]:])
-        records = b"".join(pieces)
-        inc = np.zeros(n_vec + 1, dtype=np.int64)
-        np.add.at(inc, ins, rsize)
-        # vector message k moves by the sizes of the raw messages inserted before it
-        voff_final = voff + np.cumsum(inc)[:n_vec]
-        roff = voff_ext[ins] + np.concatenate(([0], np.cumsum(rsize)[:-1]))
-    else:
-        records = vbytes
-        voff_final = voff
-        roff = np.zeros(0, dtype=np.int64)
-    per_channel: dict[int, list[tuple[NDArray[Any], NDArray[Any]]]] = {}
-    for rec, pos in zip(recs, positions):
-        cid = int(rec["channel_id"][0])
-        per_channel.setdefault(cid, []).append((rec["log_time"], voff_final[pos]))
-    rch = np.array([raws[i].channel_id for i in order], dtype=np.int64)
-    for cid in np.unique(rch).tolist():
-        sel = rch == cid
-        per_channel.setdefault(int(cid), []).append((rlog[sel], roff[sel]))
-    index: dict[int, tuple[NDArray[np.uint64], NDArray[np.uint64]]] = {}
-    for cid in sorted(per_channel):
-        log = np.concatenate([p[0] for p in per_channel[cid]]).astype(np.uint64)
-        off = np.concatenate([p[1] for p in per_channel[cid]]).astype(np.uint64)
-        o = np.lexsort((off, log))
-        index[cid] = (log[o], off[o])
-    all_log = np.concatenate([vlog, rlog]) if len(rlog) else vlog
-    count = int(len(all_log))
-    return ChunkPayload(
-        records=records,
-        message_start_ns=int(all_log.min()) if count else 0,
-        message_end_ns=int(all_log.max()) if count else 0,
-        message_count=count,
-        index=index,
-    )
-
-
-def _interleave(recs: list[NDArray[Any]]) -> tuple[bytes, NDArray[np.uint64], NDArray[np.int64], list[NDArray[np.int64]]]:
-    """Interleave record arrays by log time: bytes, file-order log times and offsets, and
-    for each input array the file-order positions of its rows."""
-    if not recs:
-        return b"", np.zeros(0, np.uint64), np.zeros(0, np.int64), []
-    log0 = recs[0]["log_time"]
-    regular = bool(np.all(log0[1:] >= log0[:-1])) and all(
-        len(r) == len(log0) and np.array_equal(r["log_time"], log0) for r in recs[1:])
-    k = len(recs)
-    sizes = np.array([r.dtype.itemsize for r in recs], dtype=np.int64)
-    if regular:
-        # one "step" = one record per channel, back to back: a single structured copy
-        n = len(log0)
-        prefix = np.concatenate(([0], np.cumsum(sizes)[:-1]))
-        step = int(sizes.sum())
-        comb = np.empty(n, dtype=np.dtype({"names": [f"m{c}" for c in range(k)],
-                                           "formats": [f"V{s}" for s in sizes.tolist()],
-                                           "offsets": prefix.tolist(), "itemsize": step}))
-        for c, r in enumerate(recs):
-            comb[f"m{c}"] = r.view(f"V{sizes[c]}")
-        voff = (np.arange(n, dtype=np.int64)[:, None] * step + prefix[None, :]).ravel()
-        vlog = np.repeat(log0, k)
-        positions = [np.arange(n, dtype=np.int64) * k + c for c in range(k)]
-        return comb.tobytes(), vlog, voff, positions
-    # general case: stable sort by (log time, block), scatter whole records
-    all_log = np.concatenate([r["log_time"] for r in recs])
-    blk = np.concatenate([np.full(len(r), c, dtype=np.int64) for c, r in enumerate(recs)])
-    order = np.lexsort((blk, all_log))
-    size_sorted = sizes[blk[order]]
-    voff = np.concatenate(([0], np.cumsum(size_sorted)[:-1])).astype(np.int64)
-    inv = np.empty_like(order)
-    inv[order] = np.arange(len(order))
-    out = np.empty(int(size_sorted.sum()), dtype=np.uint8)
-    positions = []
-    start = 0
-    for c, r in enumerate(recs):
-        pos = inv[start:start + len(r)]
-        start += len(r)
-        s = int(sizes[c])
-        # writable (overlapping) window view: row i covers out[i : i + s]; targets don't overlap
-        win = np.lib.stride_tricks.as_strided(out, shape=(len(out) - s + 1, s), strides=(1, 1))
-        win[voff[pos]] = r.view(np.uint8).reshape(len(r), s)
-        positions.append(pos)
-    return out.tobytes(), all_log[order], voff, positions
-
-
-def encode_message_index(channel_id: int, log_time_ns: NDArray[Any], offsets: NDArray[Any]) -> bytes:
-    """One Message Index record (MCAP spec, "Message Index", op 0x07)."""
-    entries = np.empty((len(log_time_ns), 2), dtype="<u8")
-    entries[:, 0] = log_time_ns
-    entries[:, 1] = offsets
-    body = entries.tobytes()
-    return struct.pack("<BQHI", _OP_MESSAGE_INDEX, 2 + 4 + len(body), channel_id, len(body)) + body
+_F8 = np.dtype(np.float64)
+_NDARRAY = np.ndarray
 
 
 def _string(s: str) -> bytes:
@@ -397,10 +169,10 @@ class McapFileWriter:
         chunk_length = self._pos - chunk_start
         index_start = self._pos
         offsets = b""
-        for cid, (log, off) in payload.index.items():
+        for cid, entries in payload.index.items():
             offsets += struct.pack("<HQ", cid, self._pos)
-            self._write(encode_message_index(cid, log, off))
-            self._counts[cid] = self._counts.get(cid, 0) + len(log)
+            self._write(encode_message_index(cid, entries))
+            self._counts[cid] = self._counts.get(cid, 0) + len(entries)
         self._chunk_indexes.append(_record(_OP_CHUNK_INDEX, struct.pack(
             "<QQQQI", payload.message_start_ns, payload.message_end_ns, chunk_start, chunk_length,
             len(offsets)) + offsets + struct.pack("<Q", self._pos - index_start) + _string(self._compression)
@@ -503,7 +275,7 @@ class VectorChannel:
             in_window = False
         if not in_window:
             w._time_slow_path(t_s, self.topic)
-        if type(values) is np.ndarray and values.dtype is _F8 and values.shape == self._shape and _LITTLE:
+        if type(values) is _NDARRAY and values.dtype is _F8 and values.shape == self._shape and _LITTLE:
             b = values.tobytes()
         else:
             b = self._values_slow_path(values)
@@ -526,12 +298,17 @@ class VectorChannel:
                            f"float values for {self.schema.fields[1:]} (without t_s), got {got}")
         return arr.astype("<f8").tobytes()
 
-    def _take(self) -> VectorBlock | None:
+    def _take(self, shared: tuple[list[float], NDArray[np.float64]] | None) -> VectorBlock | None:
+        """Hand the buffered rows over as a block; reuse ``shared`` times if they are equal."""
         n = len(self._t)
         if n == 0:
             return None
         values = np.frombuffer(b"".join(self._b), dtype="<f8").reshape(n, self.schema.n_values)
-        block = VectorBlock(self.channel_id, self._seq, np.array(self._t, dtype=np.float64), values)
+        if shared is not None and self._t == shared[0]:
+            t = shared[1]
+        else:
+            t = np.array(self._t, dtype=np.float64)
+        block = VectorBlock(self.channel_id, self._seq, t, values)
         self._seq += n
         self._t = []
         self._b = []
@@ -565,9 +342,6 @@ class EventChannel:
             raise LogError(str(w.path), f"{self.topic}: {exc.problem}") from None
         w._pending_raw.append(RawMessage(self.channel_id, self._seq, int(round(float(t_s) * NS_PER_S)), data))
         self._seq += 1
-
-
-_F8 = np.dtype(np.float64)
 
 
 class FlightLogWriter:
@@ -773,7 +547,14 @@ class FlightLogWriter:
 
     def _write_pending(self) -> float | None:
         """Write the buffered messages as one chunk, flush; return their latest time [s]."""
-        blocks = [b for b in (ch._take() for ch in self._vector) if b is not None]
+        blocks: list[VectorBlock] = []
+        shared = None
+        for ch in self._vector:
+            times = ch._t
+            block = ch._take(shared)
+            if block is not None:
+                blocks.append(block)
+                shared = (times, block.t_s)
         raws, self._pending_raw = self._pending_raw, []
         t_max = None
         if blocks or raws:
