@@ -575,6 +575,8 @@ def build_chunk(blocks: Sequence[VectorBlock], raws: Sequence[RawMessage] = ()) 
         o = np.lexsort((off, log))  # a channel written out of time order gets sorted entries
         index[cid] = _entries(log[o], off[o])
     all_log = np.concatenate([vlog, rlog])
+    if len(all_log) == 0:
+        return ChunkPayload(b"", 0, 0, 0, {})
     return ChunkPayload(records, int(all_log.min()), int(all_log.max()), len(all_log), index)
 
 

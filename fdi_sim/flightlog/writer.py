@@ -14,6 +14,7 @@ offsets) and the footer (MCAP specification, https://mcap.dev/spec, "Summary Sec
 from __future__ import annotations
 
 import math
+import numbers
 import struct
 import sys
 import zlib
@@ -530,10 +531,9 @@ class FlightLogWriter:
     def _time_slow_path(self, t_s: Any, topic: str) -> None:
         """A write whose time is outside the current flush window: flush, or raise."""
         self._check_open()
-        try:
-            t = float(t_s)
-        except (TypeError, ValueError):
-            raise LogError(str(self.path), f"{topic}: t_s = {t_s!r} is not a number") from None
+        if not isinstance(t_s, numbers.Real):
+            raise LogError(str(self.path), f"{topic}: t_s = {t_s!r} is not a number")
+        t = float(t_s)
         if not (0.0 <= t < MAX_T_S):
             raise LogError(str(self.path), f"{topic}: t_s = {t_s!r} must be finite, >= 0 s and "
                            f"< {MAX_T_S:g} s")
