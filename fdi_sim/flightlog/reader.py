@@ -100,16 +100,19 @@ class EventTopic:
     json_schema : dict
         The channel's JSON Schema.
     events : tuple of Event
+    log_time_ns : NDArray
+        MCAP log times [ns], shape (n,).
     """
 
     topic: str
     schema_name: str
     json_schema: dict[str, Any]
     events: tuple[Event, ...]
+    log_time_ns: NDArray[np.uint64]
 
     @property
     def t_s(self) -> NDArray[np.float64]:
-        """Event times [s] (log time / 1e9)."""
+        """Event times [s]: log time / 1e9, within 0.5 ns of the ``t_s`` written."""
         return np.array([e.t_s for e in self.events], dtype=np.float64)
 
     def pairs(self) -> list[tuple[float, dict[str, Any]]]:
@@ -154,7 +157,7 @@ class FlightLog:
     metadata : dict of str to dict of str to str
     message_counts : dict of str to int
     start_t_s, end_t_s : float
-        First and last message time [s] (0 for an empty log).
+        First and last message log time / 1e9 [s] (0 for an empty log).
     """
 
     path: Path
@@ -255,16 +258,19 @@ def parse_chunk(body: bytes | memoryview, check_crc: bool = True) -> ChunkData:
     packed = bytes(body[pos:pos + rlen])
     if len(packed) != rlen or usize > _MAX_CHUNK_BYTES:
         raise ValueError("chunk record is cut short or its sizes are implausible")
-    if compression == "zstd":
-        import zstandard
-        records = zstandard.ZstdDecompressor().decompress(packed, max_output_size=usize)
-    elif compression == "lz4":
-        import lz4.frame
-        records = lz4.frame.decompress(packed)
-    elif compression == "":
-        records = packed
-    else:
-        raise ValueError(f"unsupported chunk compression {compression!r}")
+    try:
+        if compression == "zstd":
+            import zstandard
+            records = zstandard.ZstdDecompressor().decompress(packed, max_output_size=usize)
+        elif compression == "lz4":
+            import lz4.frame
+            records = lz4.frame.decompress(packed)
+        elif compression == "":
+            records = packed
+        else:
+            raise ValueError(f"unsupported chunk compression {compression!r}")
+    except Exception as exc:  # zstandard.ZstdError, lz4's RuntimeError: damaged data
+        raise ValueError(f"chunk does not decompress ({exc})") from None
     if len(records) != usize:
         raise ValueError(f"chunk decompressed to {len(records)} bytes, expected {usize}")
     if check_crc and crc != 0 and zlib.crc32(records) != crc:
@@ -296,10 +302,10 @@ def _message_index(data: bytes, offset: int) -> tuple[int, NDArray[np.uint64], N
     return cid, entries[:, 0], entries[:, 1]
 
 
-def _scan_chunk(records: bytes) -> dict[int, tuple[NDArray[np.uint64], NDArray[np.uint64]]]:
-    """Index a chunk's messages by scanning it (for chunks without message indexes)."""
+def _scan_chunk(records: bytes, start: int = 0) -> dict[int, tuple[NDArray[np.uint64], NDArray[np.uint64]]]:
+    """Index the messages of a chunk (or of a whole unchunked file from ``start``) by scanning."""
     found: dict[int, tuple[list[int], list[int]]] = {}
-    for opcode, body, _length in scan_records(records):
+    for opcode, body, _length in scan_records(records, start):
         if opcode == _OP_MESSAGE:
             cid, _seq, log_ns = struct.unpack_from("<HIQ", records, body)
             logs, offs = found.setdefault(cid, ([], []))
@@ -357,6 +363,9 @@ def read_log(path: str | Path) -> FlightLog:
         if summary is None:
             raise ValueError("the file has no summary section")
         per_channel: dict[int, list[tuple[bytes, NDArray[np.uint64]]]] = {}
+        if not summary.chunk_indexes:  # an unchunked file: messages are top-level records
+            for cid, (_log, offs) in _scan_chunk(data, len(MCAP_MAGIC)).items():
+                per_channel[cid] = [(data, offs)]
         for ci in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             opcode, length = struct.unpack_from("<BQ", data, ci.chunk_start_offset)
             if opcode != _OP_CHUNK:
@@ -386,14 +395,11 @@ def read_log(path: str | Path) -> FlightLog:
     except (McapError, *_READ_ERRORS) as exc:
         raise LogError(str(p), f"the MCAP file is corrupted ({exc}); try `fdi-sim repair {p}`") from None
     counts = {t: len(d) for t, d in topics.items()}
-    starts, ends = [], []
-    for d in topics.values():
-        if len(d):
-            t = d.t_s if not isinstance(d, RawTopic) else d.log_time_ns / NS_PER_S
-            starts.append(float(np.min(t)))
-            ends.append(float(np.max(t)))
+    logs = [d.log_time_ns for d in topics.values() if len(d)]
+    start_ns = min(int(lo.min()) for lo in logs) if logs else 0
+    end_ns = max(int(lo.max()) for lo in logs) if logs else 0
     return FlightLog(path=p, topics=topics, metadata=metadata, message_counts=counts,
-                     start_t_s=min(starts) if starts else 0.0, end_t_s=max(ends) if ends else 0.0)
+                     start_t_s=start_ns / NS_PER_S, end_t_s=end_ns / NS_PER_S)
 
 
 def _decode_channel(cid: int, channel: Any, schema: Any, parts: list[tuple[bytes, NDArray[np.uint64]]]) -> TopicData:
@@ -418,7 +424,8 @@ def _decode_channel(cid: int, channel: Any, schema: Any, parts: list[tuple[bytes
     if channel.message_encoding == MESSAGE_ENCODING_JSON:
         json_schema = json.loads(schema.data) if schema is not None and schema.data else {}
         events = tuple(Event(logs[i] / NS_PER_S, json.loads(payloads[i])) for i in order)
-        return EventTopic(channel.topic, schema_name, json_schema, events)
+        return EventTopic(channel.topic, schema_name, json_schema, events,
+                          np.array([logs[i] for i in order], dtype=np.uint64))
     return RawTopic(channel.topic, schema_name, channel.message_encoding,
                     np.array([logs[i] for i in order], dtype=np.uint64), tuple(payloads[i] for i in order))
 
