@@ -222,7 +222,8 @@ class McapFileWriter:
             self._f.close()
 
     def _statistics(self) -> bytes:
-        counts = b"".join(struct.pack("<HQ", k, self._counts[k]) for k in sorted(self._counts))
+        # channels with messages only, as the reference writers do
+        counts = b"".join(struct.pack("<HQ", k, n) for k, n in sorted(self._counts.items()) if n)
         return _record(_OP_STATISTICS, struct.pack(
             "<QHIIIIQQI", self._n_messages, len(self._schemas), len(self._channels), 0,
             len(self._metadata_indexes), len(self._chunk_indexes), self._start_ns or 0, self._end_ns,

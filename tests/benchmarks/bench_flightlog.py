@@ -140,6 +140,31 @@ def bench_flightlog(path: Path, t: np.ndarray, rows: list[np.ndarray], compressi
     return time.perf_counter() - t0
 
 
+def bench_compression(t: np.ndarray, rows: list[np.ndarray]) -> None:
+    """Compress one one-second chunk of the rows at several settings."""
+    import lz4.frame
+    import zstandard
+
+    from fdi_sim.flightlog.schemas import VectorBlock, build_chunk
+    n = RATE_HZ
+    blocks = [VectorBlock(i + 1, 0, t[:n], r[:n]) for i, r in enumerate(rows)]
+    raw = bytes(build_chunk(blocks).records)
+    t0 = time.perf_counter()
+    for _ in range(20):
+        build_chunk(blocks)
+    build_us = (time.perf_counter() - t0) / 20 * 1e6
+    print(f"\none chunk (1 s, {len(raw)} bytes): build_chunk {build_us:.0f} us; compression:")
+    codecs = [(f"zstd level {lvl}", zstandard.ZstdCompressor(level=lvl).compress) for lvl in (-5, -1, 1, 3)]
+    codecs.append(("lz4 frame", lz4.frame.compress))
+    for name, fn in codecs:
+        out = fn(raw)
+        t0 = time.perf_counter()
+        for _ in range(20):
+            fn(raw)
+        el = (time.perf_counter() - t0) / 20
+        print(f"  {name:12s} {el * 1e6:7.0f} us/chunk ({el / n * 1e6:5.2f} us/step)  ratio {len(out) / len(raw):.3f}")
+
+
 def bench_read(path: Path) -> None:
     from mcap.reader import make_reader
     t0 = time.perf_counter()
@@ -181,6 +206,7 @@ def main() -> None:
                 continue
             print(f"  {name:28s} {el / n_msg * 1e6:10.2f} {el / n_steps * 1e6:9.2f} "
                   f"{os.path.getsize(p) / 1e6:7.2f}")
+        bench_compression(t, rows)
         tr, rr = make_rows(args.read_seconds, seed=1)
         big = Path(tmp) / "big.mcap"
         bench_flightlog(big, tr, rr, "zstd")

@@ -116,6 +116,27 @@ def test_summary_statistics_and_crcs(tmp_path: Path) -> None:
     assert crc == footer.summary_crc
 
 
+def test_summary_offsets_name_their_groups(tmp_path: Path) -> None:
+    """Each Summary Offset record (MCAP spec, op 0x0E) spans a run of records of its opcode,
+    and the groups tile the summary section up to the offsets themselves."""
+    path = tmp_path / "a.mcap"
+    _write_demo(path)
+    data = path.read_bytes()
+    summary_start, offset_start = struct.unpack_from("<QQ", data, len(data) - 8 - 20)
+    groups = []
+    for opcode, start, length in scan_records(data[:len(data) - 8 - 29], offset_start):
+        assert opcode == 0x0E
+        groups.append(struct.unpack_from("<BQQ", data, start))
+    assert [g[0] for g in groups] == [0x03, 0x04, 0x0B, 0x08, 0x0D]
+    pos = summary_start
+    for opcode, group_start, group_length in groups:
+        assert group_start == pos
+        ops = {op for op, _, _ in scan_records(data[:group_start + group_length], group_start)}
+        assert ops == {opcode}
+        pos += group_length
+    assert pos == offset_start
+
+
 def test_message_indexes_point_at_their_messages(tmp_path: Path) -> None:
     """Every Message Index entry, parsed by ``mcap``, names the offset of a Message record of
     its channel and time in the chunk decompressed here with zstandard."""
