@@ -493,8 +493,9 @@ class FlightLogWriter:
 
     @property
     def last_flush_t_s(self) -> float:
-        """Simulated time [s] that triggered the last flush: every message written before
-        that write is on disk."""
+        """Simulated time [s] of the last flush: the time of the write that crossed a flush
+        boundary (or the latest time flushed by :meth:`flush`). Every message written before
+        that flush is in the operating system's hands, so it survives a SIGKILL."""
         return self._last_flush_t_s
 
     @property
