@@ -1,0 +1,320 @@
+"""Operating-point grids: file format, command-line specs, envelope checks (no JSBSim here).
+
+Grid file (``aircraft/<name>/grid.toml``)
+-----------------------------------------
+::
+
+    aircraft = "f16"
+    [envelope]                      # a point outside is bad input, refused before any trim
+    h_ft = [0.0, 25000.0]
+    vc_kts = [250.0, 600.0]         # any of vc_kts, vt_kts, mach, flaps_deg, icing_eta
+    mach = [0.0, 0.72]
+    [[block]]                       # each block is a Cartesian product of its axes
+    h_ft = [5000, 10000, 15000, 20000]
+    vt_kts = [350, 370, 390, 410, 430]   # or vc_kts (exactly one speed axis per block)
+    flaps_deg = [0]                 # optional, default [0]
+    icing_eta = [0]                 # optional, default [0]: a grid axis like any other
+    [validation]                    # doublets of fdi_sim.linear.validate
+    duration_s = 10.0
+    width_s = 1.0
+    [validation.amplitudes]
+    elevator_cmd_norm = 0.01        # one per model input
+
+Several blocks let the speed range depend on the flap setting (the DHC-6 flies 10 deg flaps
+only at low speed). A command-line spec is one block: ``"h_ft=5000,10000;vt_kts=350:430:20"``
+(``start:stop:step`` includes ``stop``), checked against the aircraft's default envelope.
+
+The envelope needs Mach and calibrated airspeed of each point before any trim; they come
+from the 1976 standard atmosphere below (troposphere and lower stratosphere).
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from itertools import product
+from pathlib import Path
+from typing import Any, Mapping
+
+from fdi_sim.errors import DesignError
+from fdi_sim.operating_point import OperatingPoint
+from fdi_sim.units import FPS_PER_KT, KT_PER_FPS
+
+#: folder of the per-aircraft data files
+AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
+#: axes a grid block may have
+AXES: tuple[str, ...] = ("h_ft", "vt_kts", "vc_kts", "flaps_deg", "icing_eta")
+#: quantities an envelope may limit
+ENVELOPE_KEYS: tuple[str, ...] = ("h_ft", "vt_kts", "vc_kts", "mach", "flaps_deg", "icing_eta")
+
+# ---------------------------------------------------------------------- standard atmosphere
+_T0_R = 518.67            # sea-level temperature [deg R]
+_P0_PSF = 2116.22         # sea-level pressure [lbf/ft^2]
+_LAPSE_R_PER_FT = 0.00356616
+_H_TROPO_FT = 36089.24
+_R_AIR = 1716.49          # gas constant of air [ft lbf / (slug deg R)]
+_GAMMA = 1.4
+_G0 = 32.174049
+
+
+@dataclass(frozen=True)
+class Atmosphere:
+    """Standard-atmosphere state at one altitude.
+
+    Attributes
+    ----------
+    temperature_R : float
+        Static temperature [deg R].
+    pressure_psf : float
+        Static pressure [lbf/ft^2].
+    density_slugft3 : float
+        Density [slug/ft^3].
+    sound_speed_fps : float
+        Speed of sound [ft/s].
+    """
+
+    temperature_R: float
+    pressure_psf: float
+    density_slugft3: float
+    sound_speed_fps: float
+
+
+def isa(h_ft: float) -> Atmosphere:
+    """1976 standard atmosphere below 65 617 ft (geopotential altitude ~ geometric here)."""
+    if not -2000.0 <= h_ft <= 65617.0:
+        raise DesignError(f"h_ft = {h_ft:g} is outside the standard-atmosphere model (-2000 to 65617 ft)")
+    if h_ft <= _H_TROPO_FT:
+        T = _T0_R - _LAPSE_R_PER_FT * h_ft
+        # p = p0 (T / T0)^(g / (R L))
+        p = _P0_PSF * (T / _T0_R) ** (_G0 / (_R_AIR * _LAPSE_R_PER_FT))
+    else:
+        T = _T0_R - _LAPSE_R_PER_FT * _H_TROPO_FT
+        p11 = _P0_PSF * (T / _T0_R) ** (_G0 / (_R_AIR * _LAPSE_R_PER_FT))
+        p = p11 * math.exp(-_G0 * (h_ft - _H_TROPO_FT) / (_R_AIR * T))
+    return Atmosphere(T, p, p / (_R_AIR * T), math.sqrt(_GAMMA * _R_AIR * T))
+
+
+def vc_from_vt(h_ft: float, vt_kts: float) -> tuple[float, float]:
+    """Calibrated airspeed [kt] and Mach [-] of a true airspeed at ``h_ft`` (subsonic).
+
+    ``qc = p ((1 + 0.2 M^2)^3.5 - 1)``, ``vc = a0 sqrt(5 ((qc / p0 + 1)^(2/7) - 1))``.
+    """
+    atm, a0 = isa(h_ft), isa(0.0).sound_speed_fps
+    mach = vt_kts * FPS_PER_KT / atm.sound_speed_fps
+    qc = atm.pressure_psf * ((1 + 0.2 * mach**2) ** 3.5 - 1)
+    vc = a0 * math.sqrt(5 * ((qc / _P0_PSF + 1) ** (2 / 7) - 1))
+    return vc * KT_PER_FPS, mach
+
+
+def vt_from_vc(h_ft: float, vc_kts: float) -> tuple[float, float]:
+    """True airspeed [kt] and Mach [-] of a calibrated airspeed at ``h_ft`` (subsonic)."""
+    atm, a0 = isa(h_ft), isa(0.0).sound_speed_fps
+    qc = _P0_PSF * ((1 + 0.2 * (vc_kts * FPS_PER_KT / a0) ** 2) ** 3.5 - 1)
+    mach = math.sqrt(5 * ((qc / atm.pressure_psf + 1) ** (2 / 7) - 1))
+    return mach * atm.sound_speed_fps * KT_PER_FPS, mach
+
+
+# ---------------------------------------------------------------------- grid
+@dataclass(frozen=True)
+class Envelope:
+    """Limits of an aircraft's linearization envelope.
+
+    Attributes
+    ----------
+    limits : dict
+        ``name -> (low, high)`` for names in :data:`ENVELOPE_KEYS` [units of the name].
+    why : str
+        The reason for the limits (cited in error messages).
+    """
+
+    limits: dict[str, tuple[float, float]] = field(default_factory=dict)
+    why: str = ""
+
+    def problems(self, op: OperatingPoint) -> list[str]:
+        """What is outside the envelope at ``op`` (empty when inside)."""
+        speed_kind = "vt_kts" if op.vt_kts is not None else "vc_kts"
+        speed = float(op.vt_kts if op.vt_kts is not None else op.vc_kts)  # type: ignore[arg-type]
+        if speed_kind == "vt_kts":
+            vt, (vc, mach) = speed, vc_from_vt(op.h_ft, speed)
+        else:
+            vc, (vt, mach) = speed, vt_from_vc(op.h_ft, speed)
+        values = {"h_ft": op.h_ft, "vt_kts": vt, "vc_kts": vc, "mach": mach, "flaps_deg": op.flaps_deg,
+                  "icing_eta": op.icing_eta}
+        out = []
+        for key, (lo, hi) in self.limits.items():
+            v = values[key]
+            if not lo - 1e-9 <= v <= hi + 1e-9:
+                out.append(f"{key} = {v:.4g} outside [{lo:g}, {hi:g}]")
+        return out
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """A grid of operating points with its envelope and validation settings.
+
+    Attributes
+    ----------
+    aircraft : str
+        JSBSim model name.
+    points : tuple of OperatingPoint
+        Every point, in file order (block by block; h, speed, flaps, eta nested).
+    envelope : Envelope
+        Limits every point was checked against.
+    validation : dict
+        ``duration_s``, ``width_s``, ``start_s`` and ``amplitudes`` (input -> amplitude).
+    source : str
+        File path or the command-line spec.
+    """
+
+    aircraft: str
+    points: tuple[OperatingPoint, ...]
+    envelope: Envelope
+    validation: dict[str, Any]
+    source: str
+
+
+def _values(key: str, v: Any, source: str) -> list[float]:
+    vals = v if isinstance(v, list) else [v]
+    try:
+        out = [float(x) for x in vals]
+    except (TypeError, ValueError):
+        raise DesignError(f"{source}: axis {key!r} must be a number or a list of numbers, got {v!r}") from None
+    if not out:
+        raise DesignError(f"{source}: axis {key!r} is empty; give at least one value")
+    return out
+
+
+def _block_points(aircraft: str, block: Mapping[str, Any], source: str) -> list[OperatingPoint]:
+    unknown = [k for k in block if k not in AXES]
+    if unknown:
+        raise DesignError(f"{source}: unknown grid axis {unknown}; axes are {', '.join(AXES)}")
+    speeds = [k for k in ("vt_kts", "vc_kts") if k in block]
+    if len(speeds) != 1 or "h_ft" not in block:
+        raise DesignError(f"{source}: each block needs h_ft and exactly one of vt_kts, vc_kts (got {sorted(block)})")
+    sk = speeds[0]
+    axes = [_values(k, block.get(k, [0.0]), source) for k in ("h_ft", sk, "flaps_deg", "icing_eta")]
+    return [OperatingPoint(aircraft=aircraft, h_ft=h, flaps_deg=f, icing_eta=e, **{sk: v})
+            for h, v, f, e in product(*axes)]
+
+
+def _envelope(data: Mapping[str, Any], source: str) -> Envelope:
+    limits: dict[str, tuple[float, float]] = {}
+    why = str(data.get("why", ""))
+    for key, v in data.items():
+        if key == "why":
+            continue
+        if key not in ENVELOPE_KEYS:
+            raise DesignError(f"{source}: unknown envelope key {key!r}; keys are {', '.join(ENVELOPE_KEYS)}")
+        vals = _values(key, v, source)
+        if len(vals) != 2 or vals[0] > vals[1]:
+            raise DesignError(f"{source}: envelope.{key} must be [low, high], got {v!r}")
+        limits[key] = (vals[0], vals[1])
+    return Envelope(limits=limits, why=why)
+
+
+def check_envelope(points: tuple[OperatingPoint, ...], envelope: Envelope, source: str) -> None:
+    """Refuse points outside the envelope (one message listing all of them).
+
+    Raises
+    ------
+    DesignError
+        With each offending point and limit, and the envelope's reason.
+    """
+    bad = [f"{op.label()}: {'; '.join(p)}" for op in points if (p := envelope.problems(op))]
+    if bad:
+        why = f" ({envelope.why})" if envelope.why else ""
+        shown = "; ".join(bad[:5]) + (f"; and {len(bad) - 5} more" if len(bad) > 5 else "")
+        raise DesignError(f"{source}: {len(bad)} grid point(s) outside the linearization envelope{why}: {shown}. "
+                          "Move them inside or widen [envelope] in the grid file if the model supports it.")
+
+
+def grid_from_dict(data: Mapping[str, Any], source: str, aircraft: str | None = None) -> GridSpec:
+    """Build a :class:`GridSpec` from parsed TOML (see the module docstring for the format)."""
+    ac = data.get("aircraft", aircraft)
+    if not isinstance(ac, str) or not ac:
+        raise DesignError(f"{source}: missing 'aircraft = \"f16\"' (or DHC6) at the top")
+    if aircraft is not None and ac != aircraft:
+        raise DesignError(f"{source}: grid is for aircraft {ac!r}, but {aircraft!r} was asked for")
+    unknown = [k for k in data if k not in ("aircraft", "envelope", "block", "validation", "description")]
+    if unknown:
+        raise DesignError(f"{source}: unknown top-level keys {unknown}; use aircraft, envelope, block, validation")
+    blocks = data.get("block")
+    if not isinstance(blocks, list) or not blocks:
+        raise DesignError(f"{source}: no [[block]] of grid axes; add one with h_ft and vt_kts or vc_kts")
+    points: list[OperatingPoint] = []
+    for b in blocks:
+        points += _block_points(ac, b, source)
+    env = _envelope(data.get("envelope", {}), source)
+    check_envelope(tuple(points), env, source)
+    val = dict(data.get("validation", {}))
+    return GridSpec(aircraft=ac, points=tuple(points), envelope=env, validation=val, source=source)
+
+
+def default_grid_path(aircraft: str) -> Path:
+    """``aircraft/<aircraft>/grid.toml``."""
+    return AIRCRAFT_DATA / aircraft / "grid.toml"
+
+
+def load_grid(path: str | Path, aircraft: str | None = None) -> GridSpec:
+    """Read a grid file.
+
+    Raises
+    ------
+    DesignError
+        Missing or unreadable file, bad TOML, a bad axis, or a point outside the envelope.
+    """
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text())
+    except FileNotFoundError:
+        raise DesignError(f"grid file {p} not found; give a grid.toml or a spec like 'h_ft=5000,10000;vt_kts=350:430:20'") from None
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise DesignError(f"grid file {p}: {exc}") from None
+    return grid_from_dict(data, str(p), aircraft)
+
+
+def _parse_values(text: str, key: str, spec: str) -> list[float]:
+    try:
+        if ":" in text:
+            parts = [float(x) for x in text.split(":")]
+            if len(parts) != 3 or parts[2] <= 0 or parts[1] < parts[0]:
+                raise ValueError
+            start, stop, step = parts
+            n = int(math.floor((stop - start) / step + 1e-9)) + 1
+            return [start + i * step for i in range(n)]
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise DesignError(f"grid spec {spec!r}: cannot read {key}={text!r}; use a list '5000,10000' or "
+                          "'start:stop:step' with step > 0") from None
+
+
+def parse_grid_spec(spec: str, aircraft: str) -> GridSpec:
+    """A grid from ``"h_ft=5000,10000;vt_kts=350:430:20[;flaps_deg=0,10][;icing_eta=0,0.05]"``.
+
+    The envelope and validation settings are those of the aircraft's default grid file.
+    """
+    block: dict[str, list[float]] = {}
+    for part in filter(None, (s.strip() for s in spec.split(";"))):
+        key, sep, text = part.partition("=")
+        key = key.strip()
+        if not sep:
+            raise DesignError(f"grid spec {spec!r}: {part!r} is not 'axis=values'")
+        if key not in AXES:
+            raise DesignError(f"grid spec {spec!r}: unknown axis {key!r}; axes are {', '.join(AXES)}")
+        block[key] = _parse_values(text.strip(), key, spec)
+    base_path = default_grid_path(aircraft)
+    base: dict[str, Any] = {}
+    if base_path.exists():
+        base = tomllib.loads(base_path.read_text())
+    data = {"aircraft": aircraft, "envelope": base.get("envelope", {}), "block": [block],
+            "validation": base.get("validation", {})}
+    return grid_from_dict(data, f"grid spec {spec!r}", aircraft)
+
+
+def resolve_grid(text: str | None, aircraft: str) -> GridSpec:
+    """A grid file path, a spec string, or None for the aircraft's default grid."""
+    if text is None:
+        return load_grid(default_grid_path(aircraft), aircraft)
+    if "=" in text:
+        return parse_grid_spec(text, aircraft)
+    return load_grid(text, aircraft)
