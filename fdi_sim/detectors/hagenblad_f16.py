@@ -43,6 +43,7 @@ from fdi_sim.linear.model import LinearModel
 
 __all__ = [
     "F16Reading",
+    "F16Windows",
     "F16StudyResult",
     "PAPER_ISOLATION_PARITY",
     "PAPER_ISOLATION_PCA",
@@ -55,6 +56,7 @@ __all__ = [
     "f16_reading",
     "f16_design",
     "f16_parity_study",
+    "f16_pca_model",
     "f16_pca_study",
     "simulate_f16",
 ]

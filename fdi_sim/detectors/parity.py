@@ -38,6 +38,7 @@ __all__ = [
     "minimum_order",
     "observability_matrix",
     "parity_space",
+    "select_outputs",
     "stack_window",
 ]
 
@@ -218,6 +219,19 @@ def parity_space(
         )
     H = input_toeplitz(model.A, model.B[:, cols], model.C, model.D[:, cols], s)
     return ParitySpace(order_s=s, W=W, O=O, H=H, observability_sv=sv, known_inputs=cols)
+
+
+def select_outputs(model: LinearModel, outputs: Sequence[str]) -> LinearModel:
+    """The same model measured by a subset of its sensors (sensor-set comparisons, Lou et al. sec. 5.1)."""
+    idx = []
+    for name in outputs:
+        if name not in model.output_names:
+            raise DesignError(f"unknown output {name!r}; model outputs: {', '.join(model.output_names)}")
+        idx.append(model.output_names.index(name))
+    return LinearModel(A=model.A, B=model.B, C=model.C[idx], D=model.D[idx], dt_s=model.dt_s,
+                       state_names=model.state_names, input_names=model.input_names,
+                       output_names=tuple(outputs), input_kinds=model.input_kinds, x0=model.x0, u0=model.u0,
+                       y0=model.y0[idx], op=model.op, meta={**model.meta, "outputs": tuple(outputs)})
 
 
 def stack_window(samples: NDArray) -> NDArray[np.float64]:

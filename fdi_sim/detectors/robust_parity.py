@@ -31,29 +31,23 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.detectors.parity import (
-    AdditiveFaults,
     WindowParityDetector,
-    _inverse_sqrt,
     input_toeplitz,
     observability_matrix,
-    parity_space,
+    select_outputs,
 )
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
 __all__ = [
     "DetectionRobustness",
-    "NominalVsRobust",
-    "RelationSetResult",
     "RobustParity",
     "SSvd",
-    "compare_nominal_vs_robust",
     "design_block",
     "example_icing_models",
     "detection_robustness",
     "make_robust_parity_detector",
     "robust_parity",
-    "residual_moments",
     "robustness_cost",
     "s_svd",
     "select_outputs",
@@ -504,159 +498,6 @@ def s_svd(H: NDArray, signs: NDArray) -> SSvd:
     sigma = np.sqrt(np.abs(lam))
     V = (U.T @ H) / sigma[:, None]  # V = Sigma^-1 U' H  (eq. 59)
     return SSvd(U=U, sigma=sigma, V=V, sign=np.sign(lam))
-
-
-def select_outputs(model: LinearModel, outputs: Sequence[str]) -> LinearModel:
-    """The same model measured by a subset of its sensors (for robustness curves, sec. 5.1)."""
-    idx = []
-    for name in outputs:
-        if name not in model.output_names:
-            raise DesignError(f"unknown output {name!r}; model outputs: {', '.join(model.output_names)}")
-        idx.append(model.output_names.index(name))
-    return LinearModel(A=model.A, B=model.B, C=model.C[idx], D=model.D[idx], dt_s=model.dt_s,
-                       state_names=model.state_names, input_names=model.input_names,
-                       output_names=tuple(outputs), input_kinds=model.input_kinds, x0=model.x0, u0=model.u0,
-                       y0=model.y0[idx], op=model.op, meta={**model.meta, "outputs": tuple(outputs)})
-
-
-def residual_moments(
-    P: NDArray, model: LinearModel, order_s: int, faults: AdditiveFaults | None = None,
-    fault: NDArray | None = None, **noise,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Exact mean and covariance of ``r = P' [Y; U]`` when ``model`` generates the data.
-
-    Covariance ``P' R_q R_q' P`` with :func:`design_block` at the stationary state (eq. 26, 32:
-    ``J = E||r||^2`` is its trace). A persistent constant fault ``f`` (vector over the columns
-    of ``faults``) shifts the state to ``x_f = (I - A)^-1 B_f f`` and the window mean to
-    ``O x_f + H_f (1 ⊗ f)``; the measured inputs do not contain it. ``noise`` takes
-    ``input_sqrt``, ``disturbance_sqrt``, ``measurement_sqrt``.
-    """
-    P = np.asarray(P, float)
-    Rq = design_block(model, order_s, "stationary", "known", **noise)
-    ny = (order_s + 1) * model.n_outputs
-    if Rq.shape[0] != P.shape[0]:
-        raise DesignError(f"relations have {P.shape[0]} rows but the window of this model has {Rq.shape[0]}")
-    cov = P.T @ Rq @ Rq.T @ P
-    mean = np.zeros(P.shape[1])
-    if faults is not None and fault is not None:
-        f = np.asarray(fault, float).ravel()
-        xf = np.linalg.solve(np.eye(model.n_states) - model.A, faults.Bf @ f)  # x_f = (I - A)^-1 B_f f
-        Hf = input_toeplitz(model.A, faults.Bf, model.C, faults.Df, order_s)
-        mean = P[:ny].T @ (observability_matrix(model.A, model.C, order_s) @ xf + Hf @ np.tile(f, order_s + 1))
-    return mean, cov
-
-
-@dataclass(frozen=True, eq=False)
-class RelationSetResult:
-    """Performance of one relation set in :func:`compare_nominal_vs_robust`.
-
-    Attributes
-    ----------
-    name : str
-        "nominal" or "robust".
-    n_relations : int
-    threshold : float
-        On ``t = r' Sigma_0^-1 r`` (Sigma_0: fault-free covariance on the nominal model).
-    detection : float
-        Detection probability of the fault on the detection model at that threshold.
-    false_alarm : NDArray
-        Fault-free false-alarm probability per sample on each evaluated model.
-    false_alarm_ci : NDArray
-        (n_models, 2) Clopper-Pearson 95 % intervals of ``false_alarm``.
-    """
-
-    name: str
-    n_relations: int
-    threshold: float
-    detection: float
-    false_alarm: NDArray[np.float64]
-    false_alarm_ci: NDArray[np.float64]
-
-
-@dataclass(frozen=True, eq=False)
-class NominalVsRobust:
-    """Nominal-model parity relations against robust ones at equal detection of one fault."""
-
-    nominal: RelationSetResult
-    robust: RelationSetResult
-    model_labels: tuple[str, ...]
-    detection_target: float
-    fault_name: str
-    n_samples: int
-
-
-def compare_nominal_vs_robust(
-    nominal: LinearModel,
-    perturbed: Sequence[LinearModel],
-    order_s: int,
-    faults: AdditiveFaults,
-    fault: int,
-    fault_size: float,
-    rng: np.random.Generator,
-    detection: float = 0.9,
-    n_relations: int | None = None,
-    weights: Sequence[float] | None = None,
-    n_samples: int = 100_000,
-    labels: Sequence[str] | None = None,
-    detect_on: int = 0,
-    scale_by_noise: bool = True,
-    **noise,
-) -> NominalVsRobust:
-    """False-alarm rates of nominal and robust relations when both detect one fault equally well.
-
-    Nominal relations: the exact parity space of ``nominal`` with known inputs,
-    ``[W; -H'W]`` (eq. 4). Robust relations: :func:`robust_parity` over ``[nominal, *perturbed]``
-    with stationary state scaling and the same noise (eq. 35, 41), ``n_relations`` of them
-    (default: as many as the nominal set). Each set is tested with ``t = r' Sigma_0^-1 r``; its
-    threshold is set so the fault of size ``fault_size`` is detected with probability
-    ``detection`` on model ``detect_on`` (0 = nominal, k = perturbed[k-1]); then the fault-free
-    false-alarm probability is measured on every model. Residuals are Gaussian with the exact
-    moments of :func:`residual_moments`, sampled ``n_samples`` times per case. With
-    ``scale_by_noise`` the robust SVD works in units of the sensor-noise and input standard
-    deviations (``output_scale``/``input_scale`` of :func:`robust_parity`).
-    """
-    from scipy.stats import beta
-
-    models = [nominal, *perturbed]
-    _check_same_size(models)
-    labels = tuple(labels) if labels is not None else ("nominal",) + tuple(f"perturbed[{k}]" for k in range(len(perturbed)))
-    if len(labels) != len(models):
-        raise DesignError(f"{len(labels)} labels for {len(models)} models")
-    if not 0.0 < detection < 1.0:
-        raise DesignError(f"detection must be in (0, 1), got {detection}")
-    space = parity_space(nominal, order_s)
-    P_nom = np.vstack([space.W, -space.H.T @ space.W])  # r = W'(Y - H U) = [W; -H'W]' [Y; U]
-    p = space.n_relations if n_relations is None else int(n_relations)
-    scales = {}
-    if scale_by_noise:
-        for key, arg in (("output_scale", "measurement_sqrt"), ("input_scale", "input_sqrt")):
-            if noise.get(arg) is not None:
-                M = np.atleast_2d(np.asarray(noise[arg], float))
-                scales[key] = np.sqrt(np.diag(M @ M.T))
-    rob = robust_parity(models, order_s, p, weights, "stationary", "known", **noise, **scales)
-    f = np.zeros(faults.n_faults)
-    f[fault] = fault_size
-    results = []
-    for name, P in (("nominal", P_nom), ("robust", rob.P)):
-        _, cov0 = residual_moments(P, nominal, order_s, **noise)
-        Wh = _inverse_sqrt(cov0, f"{name} fault-free residual covariance")
-        mf, covf = residual_moments(P, models[detect_on], order_s, faults, f, **noise)
-        z = rng.standard_normal((n_samples, P.shape[1]))
-        tf = np.sum(((mf + z @ np.linalg.cholesky(covf).T) @ Wh) ** 2, axis=1)
-        h = float(np.quantile(tf, 1.0 - detection))
-        far, ci = [], []
-        for m in models:
-            _, cq = residual_moments(P, m, order_s, **noise)
-            z = rng.standard_normal((n_samples, P.shape[1]))
-            k = int(np.sum(np.sum((z @ np.linalg.cholesky(cq).T @ Wh) ** 2, axis=1) > h))
-            far.append(k / n_samples)
-            ci.append((beta.ppf(0.025, k, n_samples - k + 1) if k else 0.0,
-                       beta.ppf(0.975, k + 1, n_samples - k) if k < n_samples else 1.0))
-        results.append(RelationSetResult(name=name, n_relations=P.shape[1], threshold=h,
-                                         detection=float(np.mean(tf > h)), false_alarm=np.array(far),
-                                         false_alarm_ci=np.array(ci)))
-    return NominalVsRobust(nominal=results[0], robust=results[1], model_labels=labels, detection_target=detection,
-                           fault_name=faults.names[fault], n_samples=n_samples)
 
 
 def example_icing_models(etas: Sequence[float] = (0.0, 0.05, 0.1), dt_s: float = 0.05) -> list[LinearModel]:

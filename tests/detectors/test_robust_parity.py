@@ -9,18 +9,16 @@ from hypothesis import strategies as st
 
 from fdi_sim.detectors.parity import AdditiveFaults, input_toeplitz, observability_matrix, parity_space
 from fdi_sim.detectors.robust_parity import (
-    compare_nominal_vs_robust,
     design_block,
     detection_robustness,
     example_icing_models,
     make_robust_parity_detector,
-    residual_moments,
     robust_parity,
     robustness_cost,
     s_svd,
     select_outputs,
 )
-from fdi_sim.detectors.stochastic_parity import noise_window_covariance
+from fdi_sim.detectors.stochastic_parity import compare_nominal_vs_robust, noise_window_covariance, residual_moments
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 

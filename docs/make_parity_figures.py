@@ -1,0 +1,237 @@
+"""Figures and tables for docs/parity.md (parity family: Hagenblad F-16 study, robust parity).
+
+Run from the repository root:  .venv/bin/python docs/make_parity_figures.py [f16] [readings] [robust]
+(about a minute for all three parts).
+Writes docs/figures/parity_*.png and prints every number quoted in docs/parity.md.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Ellipse  # noqa: E402
+from scipy.spatial import ConvexHull  # noqa: E402
+
+from fdi_sim.detectors.hagenblad_f16 import (  # noqa: E402
+    PAPER_P_EQ28,
+    PAPER_READING,
+    f16_design,
+    f16_parity_study,
+    f16_pca_model,
+    f16_pca_study,
+    f16_reading,
+    simulate_f16,
+)
+from fdi_sim.detectors.parity import AdditiveFaults  # noqa: E402
+from fdi_sim.detectors.pca import stack_data_windows  # noqa: E402
+from fdi_sim.detectors.robust_parity import example_icing_models, robust_parity, select_outputs  # noqa: E402
+from fdi_sim.detectors.stochastic_parity import compare_nominal_vs_robust, incorrect_diagnosis_matrix  # noqa: E402
+
+OUT = Path(__file__).resolve().parent / "figures"
+COLORS = ["k", "tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown"]
+LABELS = ["no fault"] + [f"f{i}" for i in range(1, 7)]
+np.set_printoptions(precision=4, suppress=True, linewidth=120)
+
+
+def cloud(ax, pts, color, label):
+    """Scatter, mean, 1-sigma covariance ellipse and convex hull of one group (as in Fig. 1 and 3)."""
+    ax.scatter(pts[:, 0], pts[:, 1], s=2, color=color, alpha=0.25)
+    m = pts.mean(0)
+    ev, V = np.linalg.eigh(np.cov(pts.T))
+    ang = np.degrees(np.arctan2(V[1, 1], V[0, 1]))
+    ax.add_patch(Ellipse(m, 2 * np.sqrt(ev[1]), 2 * np.sqrt(ev[0]), angle=ang, fill=False, color=color, lw=1.5))
+    hull = ConvexHull(pts)
+    ax.plot(*np.vstack([pts[hull.vertices], pts[hull.vertices[:1]]]).T, color=color, lw=0.7)
+    ax.plot(*m, "o", color=color, ms=5, label=label)
+
+
+def residual_groups(transform, reading, rng, n=300):
+    out = [transform(simulate_f16(reading, None, n, rng))]
+    out += [transform(simulate_f16(reading, j, n, rng)) for j in range(6)]
+    return out
+
+
+def fig_f16(reading, rng):
+    design = f16_design(reading)
+    # basis ordered by fault information: right singular vectors of the stacked fault vectors
+    _, sv, Vt = np.linalg.svd(design.mu_bar)
+    print("parity fault-vector singular values (information per component):", sv)
+    groups = residual_groups(lambda w: design.residual(w.Y, w.U) @ Vt.T, reading, rng)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5))
+    for ax, (i, j) in zip(axes, [(0, 1), (2, 3)]):
+        for g, c, lab in zip(groups, COLORS, LABELS):
+            cloud(ax, g[:, [i, j]], c, lab)
+        ax.set_xlabel(f"r{i + 1}")
+        ax.set_ylabel(f"r{j + 1}")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[0].set_xscale("symlog", linthresh=5)
+    axes[0].set_yscale("symlog", linthresh=5)
+    fig.suptitle("F-16 stochastic parity residuals, L = 3 (equivalent of Hagenblad et al. Fig. 1); "
+                 "components ordered by fault information")
+    fig.tight_layout()
+    fig.savefig(OUT / "parity_f16_fig1.png", dpi=110)
+    plt.close(fig)
+
+    # Fig. 2: fault vectors in the plane that holds the confusable faults 2, 5, 6, unit circle = 1 sigma
+    mu = design.mu_bar
+    basis, _ = np.linalg.qr(np.stack([mu[4], mu[5]], 1))
+    fig, ax = plt.subplots(figsize=(6, 6))
+    t = np.linspace(0, 2 * np.pi, 200)
+    ax.plot(np.cos(t), np.sin(t), "k:", lw=1, label="1 sigma")
+    for g, c, lab in zip(residual_groups(lambda w: design.residual(w.Y, w.U) @ basis, reading, rng, 150), COLORS, LABELS):
+        ax.scatter(g[:, 0], g[:, 1], s=2, color=c, alpha=0.3)
+    for k in (0, 1, 2, 4, 5):
+        v = mu[k] @ basis
+        scale = min(1.0, 13 / np.linalg.norm(v))
+        ax.annotate("", xy=v * scale, xytext=(0, 0), arrowprops=dict(color=COLORS[k + 1], width=1.5, headwidth=7))
+        ax.text(*(v * scale * 1.08), f"f{k + 1}" + ("" if scale == 1 else f" (x{scale:.2f})"), color=COLORS[k + 1])
+    dirs = {k: mu[k] @ basis / np.linalg.norm(mu[k] @ basis) for k in (1, 4, 5)}
+    for a, b in ((1, 4), (4, 5)):
+        bis = dirs[a] + dirs[b]
+        bis /= np.linalg.norm(bis)
+        ax.plot([0, 16 * bis[0]], [0, 16 * bis[1]], "--", color="gray", lw=1)
+    ax.set_xlim(-12, 17)
+    ax.set_ylim(-9, 14)
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+    ax.set_title("Normalized fault vectors mu_bar projected on the plane of f5, f6 (equivalent of Fig. 2)\n"
+                 "dashed: angle decision lines f2|f5, f5|f6; long arrows shortened (factor); f1, f2 clouds off frame",
+                 fontsize=8)
+    fig.tight_layout()
+    fig.savefig(OUT / "parity_f16_fig2.png", dpi=110)
+    plt.close(fig)
+
+
+def fig_pca(reading, rng):
+    pca, sig = f16_pca_model(reading, 20000, rng)
+    _, sv, Vt = np.linalg.svd(sig)
+    groups = residual_groups(lambda w: pca.normalized_residual(stack_data_windows(w.Y, w.U)) @ Vt.T, reading, rng)
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5))
+    for ax, (i, j) in zip(axes[:2], [(0, 1), (2, 3)]):
+        for g, c, lab in zip(groups, COLORS, LABELS):
+            cloud(ax, g[:, [i, j]], c, lab)
+        ax.set_xlabel(f"r{i + 1}")
+        ax.set_ylabel(f"r{j + 1}")
+        ax.grid(alpha=0.3)
+    axes[0].set_xscale("symlog", linthresh=5)
+    axes[0].set_yscale("symlog", linthresh=5)
+    axes[0].legend(fontsize=8)
+    ev = pca.eigenvalues
+    axes[2].semilogy(np.arange(1, ev.size + 1), ev, "o-")
+    axes[2].axvline(14.5, color="r", ls="--", label="split: 14 model / 4 residual")
+    axes[2].set_xlabel("index")
+    axes[2].set_ylabel("eigenvalue of R_Z")
+    axes[2].legend()
+    axes[2].grid(alpha=0.3)
+    fig.suptitle("F-16 PCA residuals, L = 3, n_r = 4 (equivalent of Fig. 3) and the eigenvalues that choose n_r")
+    fig.tight_layout()
+    fig.savefig(OUT / "parity_f16_fig3_pca.png", dpi=110)
+    plt.close(fig)
+    print("PCA eigenvalues:", ev)
+
+
+def readings_table(rng):
+    print("\n== eq. 28 under each reading (max |P - paper|) and simulated P(correct), 100 000 windows/case ==")
+    for proc in ("none", "all-states", "speed-disturbance"):
+        for sizes in ("unit", "table"):
+            rd = f16_reading(proc, sizes)
+            P = incorrect_diagnosis_matrix(f16_design(rd), rd.magnitudes).P
+            res = f16_parity_study(rd, 100_000, rng)
+            print(f"{proc:18s} {sizes:5s} max|dP| = {np.abs(P - PAPER_P_EQ28).max():.4f}  h = {res.threshold.h:.3f}"
+                  f"  P(correct) = {np.round(res.p_correct, 3)}")
+            if (proc, sizes) == PAPER_READING or (proc, sizes) == ("all-states", "unit"):
+                print(P)
+    exact = f16_parity_study(f16_reading(*PAPER_READING), 100_000, rng, exact=True)
+    print("exact ZOH model: P(2|5) = %.4f, P(5|6) = %.4f" % (exact.P_eq14.P[1, 4], exact.P_eq14.P[4, 5]))
+    print("\n== PCA threshold vs training size (h by simulation with 100 000 windows) ==")
+    for n_train in (1000, 3000, 10_000, 100_000):
+        r = f16_pca_study(f16_reading(*PAPER_READING), n_train, 100_000, rng)
+        print(f"n_train = {n_train:6d}: h = {r.threshold.h:.3f}  P(correct) = {np.round(r.p_correct, 3)}")
+
+
+NOISE = dict(input_sqrt=np.diag([0.05, 0.1]), disturbance_sqrt=np.array([[2.0]]),
+             measurement_sqrt=np.diag([0.05, 5e-4, 5e-4, 5e-4, 0.02]))
+
+
+def robust_figures(rng):
+    ms = example_icing_models((0.0, 0.05, 0.1))
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
+    sets = {"all 5 sensors": None, "no az": ("u_mps", "alpha_rad", "q_radps", "theta_rad"),
+            "no alpha, no az": ("u_mps", "q_radps", "theta_rad")}
+    for ax, mode in zip(axes, ("known", "noise")):
+        for lab, outs in sets.items():
+            mm = ms if outs is None else [select_outputs(m, outs) for m in ms]
+            idx = [ms[0].output_names.index(o) for o in mm[0].output_names]
+            noise = {**NOISE, "measurement_sqrt": NOISE["measurement_sqrt"][np.ix_(idx, idx)]}
+            d = robust_parity(mm, 2, n_relations=1, state_sqrt="stationary", inputs=mode,
+                              output_scale=np.diag(noise["measurement_sqrt"]),
+                              input_scale=[0.05, 0.1] if mode == "known" else None, **noise)
+            c = d.curve()
+            ax.semilogy(np.arange(c.size)[1:], c[1:], "o-", label=lab)
+            print(f"J*(p) inputs={mode} {lab}: first 6 = {c[1:7]}")
+        ax.set_xlabel("number of parity relations p")
+        ax.set_ylabel("J*(p) = sum of the p smallest sigma^2 (noise units)")
+        ax.set_title("known inputs, relations on [Y; U] (eq. 41)" if mode == "known"
+                     else "inputs treated as noise, relations on Y (eq. 35)", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend()
+    fig.suptitle("Robustness curves J*(p) (Lou et al. sec. 5.1, Fig. 4) for three sensor sets; "
+                 "synthetic clean + iced (eta 0.05, 0.1) set, s = 2")
+    fig.tight_layout()
+    fig.savefig(OUT / "parity_robustness_curve.png", dpi=110)
+    plt.close(fig)
+
+    faults = AdditiveFaults.from_model(ms[0], actuators=["elevator_rad"])
+    print("\n== nominal vs robust relations, s = 2, 0.9 detection of a 0.01 rad elevator bias on the clean model ==")
+    rows = []
+    for p in (1, 2, 3, 11):
+        r = compare_nominal_vs_robust(ms[0], ms[1:], 2, faults, 0, 0.01, rng, 0.9, n_relations=p, n_samples=400_000,
+                                      labels=("clean", "eta 0.05", "eta 0.1"), **NOISE)
+        rows.append(r)
+        for rs in (r.nominal, r.robust):
+            print(f"{rs.name:8s} p={rs.n_relations:2d} h={rs.threshold:7.2f} det={rs.detection:.3f} "
+                  f"FAR={np.array2string(rs.false_alarm, precision=6)} "
+                  f"CI(eta0.1)=[{rs.false_alarm_ci[2, 0]:.2e}, {rs.false_alarm_ci[2, 1]:.2e}]")
+    r_iced = compare_nominal_vs_robust(ms[0], ms[1:], 2, faults, 0, 0.01, rng, 0.9, n_relations=1, n_samples=400_000,
+                                       detect_on=2, **NOISE)
+    print("detection set on the eta 0.1 model instead: nominal FAR", r_iced.nominal.false_alarm,
+          "robust FAR", r_iced.robust.false_alarm)
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    eta = [0.0, 0.05, 0.1]
+    ax.semilogy(eta, np.maximum(rows[0].nominal.false_alarm, 1e-6), "ks-", label="nominal parity space (11 relations)")
+    for r, mk in zip(rows, "o^vd"):
+        ax.semilogy(eta, np.maximum(r.robust.false_alarm, 1e-6), mk + "-", label=f"robust, p = {r.robust.n_relations}")
+    ax.set_xlabel("icing eta of the fault-free flight")
+    ax.set_ylabel("false-alarm probability per sample")
+    ax.set_title("Equal detection (0.9) of a 0.01 rad elevator bias; synthetic model set\n(values < 1e-6 drawn at 1e-6)",
+                 fontsize=9)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(OUT / "parity_nominal_vs_robust.png", dpi=110)
+    plt.close(fig)
+
+
+def main() -> None:
+    OUT.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(2024)
+    reading = f16_reading(*PAPER_READING)
+    import sys
+
+    parts = set(sys.argv[1:]) or {"f16", "readings", "robust"}
+    if "f16" in parts:
+        fig_f16(reading, rng)
+        fig_pca(reading, rng)
+    if "readings" in parts:
+        readings_table(rng)
+    if "robust" in parts:
+        robust_figures(rng)
+
+
+if __name__ == "__main__":
+    main()
