@@ -201,8 +201,7 @@ PAPER_READING = ("none", "unit")
 def f16_design(reading: F16Reading, window_L: int = 3, exact: bool = False) -> StochasticParity:
     """Stochastic parity design of the F-16 study (eq. 5-11) for window ``L`` (order s = L - 1)."""
     model = f16_model(exact)
-    return stochastic_parity(model, window_L - 1, f16_faults(model), reading.R,
-                             Bv=reading.Bv if reading.Bv.shape[1] else np.zeros((5, 0)), Q=reading.Q)
+    return stochastic_parity(model, window_L - 1, f16_faults(model), reading.R, Bv=reading.Bv, Q=reading.Q)
 
 
 @dataclass(frozen=True, eq=False)
