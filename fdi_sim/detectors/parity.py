@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from fdi_sim.detectors.base import Residual
-from fdi_sim.errors import DesignError
+from fdi_sim.errors import DesignError, SimulationDiverged
 from fdi_sim.linear.model import LinearModel
 
 __all__ = [
@@ -439,10 +439,15 @@ class WindowParityDetector:
         y = np.asarray(y, float).ravel()
         if y.size != self._n_y:
             raise DesignError(f"y has {y.size} entries; the model has {self._n_y} outputs")
+        uk = self._known_u(u)
+        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(uk))):
+            bad = [f"y[{i}]" for i in np.flatnonzero(~np.isfinite(y))] + [
+                f"u[{self.known_inputs[i]}]" for i in np.flatnonzero(~np.isfinite(uk))]
+            raise SimulationDiverged(float(t_s), f"detector {self.id} received non-finite {', '.join(bad)}")
         self._ybuf = np.roll(self._ybuf, -1, axis=0)
         self._ubuf = np.roll(self._ubuf, -1, axis=0)
         self._ybuf[-1] = y - self.y0
-        self._ubuf[-1] = self._known_u(u)
+        self._ubuf[-1] = uk
         self._count += 1
         r = self.proj_y @ self._ybuf.ravel() + self.proj_u @ self._ubuf.ravel()
         valid = self._count > self.order_s

@@ -15,7 +15,7 @@ from fdi_sim.detectors.parity import (
     observability_matrix,
     parity_space,
 )
-from fdi_sim.errors import DesignError
+from fdi_sim.errors import DesignError, SimulationDiverged
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.registry import get, ids
 
@@ -176,3 +176,13 @@ def test_noise_normalized_parity_detector_and_isolation():
 def test_registry_lists_the_parity_family():
     for id_ in ("parity-v1", "parity-robust-v1", "parity-stochastic-v1", "pca-v1"):
         assert id_ in ids("detector")
+
+
+def test_non_finite_signals_raise_with_time_and_signal():
+    m = random_model(np.random.default_rng(10))
+    det = get("detector", "parity-v1").factory(m, order_s=2, threshold=1.0)
+    det.step(0.0, np.zeros(2), np.zeros(3))
+    with pytest.raises(SimulationDiverged, match=r"0\.100 s: detector parity-v1 received non-finite y\[1\]"):
+        det.step(0.1, np.zeros(2), np.array([0.0, np.nan, 0.0]))
+    with pytest.raises(DesignError, match="expected the model's 2 inputs"):
+        det.step(0.2, np.zeros(5), np.zeros(3))
