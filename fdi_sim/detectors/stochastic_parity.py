@@ -501,6 +501,8 @@ def compare_nominal_vs_robust(
         raise DesignError(f"{len(labels)} labels for {len(models)} models")
     if not 0.0 < detection < 1.0:
         raise DesignError(f"detection must be in (0, 1), got {detection}")
+    if not 0 <= int(fault) < faults.n_faults:
+        raise DesignError(f"fault index {fault} outside 0..{faults.n_faults - 1} ({', '.join(faults.names)})")
     space = parity_space(nominal, order_s)
     P_nom = np.vstack([space.W, -space.H.T @ space.W])  # r = W'(Y - H U) = [W; -H'W]' [Y; U]
     p = space.n_relations if n_relations is None else int(n_relations)
@@ -519,13 +521,13 @@ def compare_nominal_vs_robust(
         Wh = _inverse_sqrt(cov0, f"{name} fault-free residual covariance")
         mf, covf = residual_moments(P, models[detect_on], order_s, faults, f, **noise)
         z = rng.standard_normal((n_samples, P.shape[1]))
-        tf = np.sum(((mf + z @ np.linalg.cholesky(covf).T) @ Wh) ** 2, axis=1)
+        tf = np.sum(((mf + z @ _psd_sqrt(covf).T) @ Wh) ** 2, axis=1)
         h = float(np.quantile(tf, 1.0 - detection))
         far, ci = [], []
         for m in models:
             _, cq = residual_moments(P, m, order_s, **noise)
             z = rng.standard_normal((n_samples, P.shape[1]))
-            k = int(np.sum(np.sum((z @ np.linalg.cholesky(cq).T @ Wh) ** 2, axis=1) > h))
+            k = int(np.sum(np.sum((z @ _psd_sqrt(cq).T @ Wh) ** 2, axis=1) > h))
             far.append(k / n_samples)
             ci.append((beta.ppf(0.025, k, n_samples - k + 1) if k else 0.0,
                        beta.ppf(0.975, k + 1, n_samples - k) if k < n_samples else 1.0))
@@ -534,3 +536,9 @@ def compare_nominal_vs_robust(
                                          false_alarm_ci=np.array(ci)))
     return NominalVsRobust(nominal=results[0], robust=results[1], model_labels=labels, detection_target=detection,
                            fault_name=faults.names[fault], n_samples=n_samples)
+
+
+def _psd_sqrt(M: NDArray) -> NDArray[np.float64]:
+    """A square root ``G`` with ``G G' = M`` of a symmetric positive semidefinite matrix (eigh)."""
+    ev, V = np.linalg.eigh((M + M.T) / 2)
+    return V * np.sqrt(np.clip(ev, 0.0, None))
