@@ -34,6 +34,7 @@ from scipy.signal import place_poles
 from scipy.stats import chi2
 
 from fdi_sim.detectors.base import Residual
+from fdi_sim.detectors.kalman import observer_residual_covariance
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
@@ -41,13 +42,7 @@ Array = NDArray[np.float64]
 
 
 class PoleCountError(DesignError):
-    """The number of completion poles given differs from the number the design can place.
-
-    Attributes
-    ----------
-    n_placeable : int
-        How many completion poles this design can place.
-    """
+    """Wrong number of completion poles; ``n_placeable`` is how many this design can place."""
 
     def __init__(self, message: str, n_placeable: int) -> None:
         super().__init__(message)
@@ -667,28 +662,8 @@ def design_detection_filter(
         gain = beard_jones_gain(
             A, C, F, det, np.exp(spread_poles(completion_pole_radps, n_can) * dt), names, discrete=True, allow_shift=allow_shift
         )
-    S = residual_covariance(gain.A_cl, C, gain.L, Q, R)
+    S = observer_residual_covariance(gain.A_cl, C, gain.L, Q, R)
     return DetectionFilterDesign(dmodel, gain, S)
-
-
-def residual_covariance(Acl: Array, C: Array, L: Array, Q: NDArray | None, R: NDArray | None) -> Array:
-    """Steady-state covariance of the residual ``r = C e + v`` of a discrete observer.
-
-    ``P = Acl P Acl' + Q + L R L'`` (discrete Lyapunov), ``S = C P C' + R``; identity if no noise is given.
-    """
-    n, m = Acl.shape[0], C.shape[0]
-    if Q is None and R is None:
-        return np.eye(m)
-    Qm = np.zeros((n, n)) if Q is None else np.asarray(Q, float)
-    Rm = np.zeros((m, m)) if R is None else np.asarray(R, float)
-    if not _is_stable(np.linalg.eigvals(Acl), True):
-        raise DesignError("residual covariance needs a stable filter (|z| < 1)")
-    P = sla.solve_discrete_lyapunov(Acl, Qm + L @ Rm @ L.T)
-    S = C @ P @ C.T + Rm
-    S = 0.5 * (S + S.T)
-    if np.min(np.linalg.eigvalsh(S)) <= 0:
-        raise DesignError("residual covariance is singular: give a measurement-noise covariance R > 0")
-    return S
 
 
 class BeardJonesFilter:

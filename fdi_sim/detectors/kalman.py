@@ -128,6 +128,26 @@ def steady_state_kalman(model: LinearModel, Qd: NDArray, Rd: NDArray, G: NDArray
     return KalmanDesign(md, K, P, 0.5 * (Ppost + Ppost.T), 0.5 * (S + S.T), Qx, Rd)
 
 
+def observer_residual_covariance(Acl: Array, C: Array, L: Array, Q: NDArray | None, R: NDArray | None) -> Array:
+    """Steady-state covariance of the residual ``r = C e + v`` of a discrete observer.
+
+    ``P = Acl P Acl' + Q + L R L'`` (discrete Lyapunov), ``S = C P C' + R``; identity if no noise is given.
+    """
+    n, m = Acl.shape[0], C.shape[0]
+    if Q is None and R is None:
+        return np.eye(m)
+    Qm = np.zeros((n, n)) if Q is None else np.asarray(Q, float)
+    Rm = np.zeros((m, m)) if R is None else np.asarray(R, float)
+    if np.max(np.abs(np.linalg.eigvals(Acl))) >= 1.0:
+        raise DesignError("residual covariance needs a stable filter (|z| < 1)")
+    P = sla.solve_discrete_lyapunov(Acl, Qm + L @ Rm @ L.T)
+    S = C @ P @ C.T + Rm
+    S = 0.5 * (S + S.T)
+    if np.min(np.linalg.eigvalsh(S)) <= 0:
+        raise DesignError("residual covariance is singular: give a measurement-noise covariance R > 0")
+    return S
+
+
 # ----------------------------------------------------------------------------- tests (pure functions)
 
 

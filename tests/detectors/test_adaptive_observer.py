@@ -92,7 +92,7 @@ def test_bad_input() -> None:
 
 def test_fig_7_tracking_example_1_per_step_gains() -> None:
     """Fig. 7 / sec. VI(a): |eps| < 2.5e-2 while tracking, < 4e-3 one second after, accuracy > 90 % then, 98-99 % later."""
-    run = run_sidar_example(1, tracking=True, m_gain=10 / PER_STEP_S, n_gain=5 / PER_STEP_S, t_end_s=20.0)
+    run = run_sidar_example(1, tracking=True, m_gain=10 / PER_STEP_S, n_gain=5 / PER_STEP_S, t_end_s=20.0, substeps=4)
     t, e = run.t_s, run.output_error_norm
     assert e[(t >= 1.0) & (t <= 12.0)].max() < 2.5e-2
     assert e[t >= 13.0].max() < 4e-3
@@ -135,3 +135,29 @@ def test_fig_9_example_2_tracking() -> None:
     t = run.t_s
     err = np.linalg.norm(run.params_hat - run.params_true, axis=1) / np.linalg.norm(run.params_true, axis=1)
     assert run.output_error_norm[(t >= 1.4) & (t <= 12)].max() < 2e-2 and err[t >= 14.5].max() < 0.10
+
+
+def test_registered_observer_detectors_follow_the_contract() -> None:
+    from fdi_sim import registry
+    from fdi_sim.detectors.lmi_filter import twin_otter_longitudinal_interim
+
+    m = twin_otter_longitudinal_interim()
+    noise = {"process_std": [0.02, 2e-4, 1e-3, 1e-5], "sensor_std": [0.1, 0.002, 0.002, 0.002]}
+    params = {
+        "beard-jones-v1": {"sensor_std": noise["sensor_std"]},
+        "lmi-detection-v1": {"sensor_std": [1.0, 0.002, 0.002, 0.002], "method": "direct"},
+        "kalman-nis-v1": noise, "kalman-tv-nis-v1": noise,
+        "kalman-mmae-v1": {**noise, "alternatives": {"iced": twin_otter_longitudinal_interim(0.2)}},
+        "adaptive-observer-v1": {**noise, "m_gain": [3e-4, 0.3, 0.3, 0.3], "n_gain": [3e-4, 0.3, 0.3, 0.3]},
+    }
+    ids = set(registry.ids("detector"))
+    assert set(params) <= ids
+    for pid, kw in params.items():
+        det = registry.get("detector", pid).factory(m, **kw)
+        assert isinstance(det, Detector) and det.id == pid
+        det.reset(np.random.default_rng(0))
+        outs = [det.step(k / 120, m.u0, m.y0) for k in range(3)]  # trim in, trim out: no alarm
+        assert all(not r.alarm and np.all(np.isfinite(r.r)) for r in outs)
+        assert outs[0].scores is None or len(outs[0].scores) == len(det.hypotheses)
+    with pytest.raises(DesignError, match="alternatives"):
+        registry.get("detector", "kalman-mmae-v1").factory(m)

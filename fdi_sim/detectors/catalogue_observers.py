@@ -1,0 +1,133 @@
+"""Registered observer-based detectors (imported by ``fdi_sim.detectors.catalogue``).
+
+Every factory takes ``(model: LinearModel, **params)`` for one operating point and returns a
+detector with the common contract (``id``, ``hypotheses``, ``reset(rng)``, ``step(t_s, u, y)``).
+A continuous model is discretized at ``dt_s`` (default 1/120 s, the loop rate). Noise is given
+as standard deviations per sample: ``process_std`` per state [state units], ``sensor_std`` per
+output [output units]. When omitted, unit standard deviations are used (nothing is guessed) and
+the chi-square statistic is then only a weighted norm: give the real values for a calibrated
+false-alarm rate.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_gains
+from fdi_sim.detectors.beard_jones import BeardJonesBank, BeardJonesFilter, plan_bank
+from fdi_sim.detectors.kalman import KalmanInnovationDetector, MultipleModelBank, TimeVaryingKalmanDetector, steady_state_kalman
+from fdi_sim.detectors.lmi_filter import LmiDetectionFilter, design_lmi_filter
+from fdi_sim.errors import DesignError
+from fdi_sim.linear.model import LinearModel
+from fdi_sim.registry import register
+
+DEFAULT_DT_S = 1.0 / 120.0
+
+
+def _dt(model: LinearModel, dt_s: float | None) -> float:
+    return model.dt_s if model.is_discrete else float(DEFAULT_DT_S if dt_s is None else dt_s)
+
+
+def _discrete(model: LinearModel, dt_s: float | None) -> LinearModel:
+    return model if model.is_discrete else model.discretize(_dt(model, dt_s))
+
+
+def _diag(std: Sequence[float] | float | None, size: int, what: str) -> np.ndarray:
+    v = np.ones(size) if std is None else np.broadcast_to(np.asarray(std, float), (size,))
+    if v.shape != (size,) or np.any(v < 0):
+        raise DesignError(f"{what} needs {size} non-negative standard deviations, got {std!r}")
+    return np.diag(v**2)
+
+
+def _controls(model: LinearModel) -> list[str]:
+    return [model.input_names[i] for i in model.control_columns()]
+
+
+def make_beard_jones(model: LinearModel, faults: Sequence[str] | None = None, detection_pole_radps: float = -4.0,
+                     completion_pole_radps: float = -6.0, dt_s: float | None = None, sensor_std: Any = None,
+                     process_std: Any = None, alpha: float = 1e-3, max_angle_rad: float = 0.35) -> BeardJonesFilter | BeardJonesBank:
+    """Beard-Jones filter for actuator faults (default: every control input); a bank if they cannot share one."""
+    faults = list(faults) if faults is not None else _controls(model)
+    R = _diag(sensor_std, model.n_outputs, "sensor_std")
+    Q = _diag(process_std, model.n_states, "process_std") if process_std is not None else None
+    designs = plan_bank(model, faults, detection_pole_radps, completion_pole_radps, None if model.is_discrete else _dt(model, dt_s), Q, R)
+    filters = [BeardJonesFilter(d, alpha, max_angle_rad) for d in designs]
+    return filters[0] if len(filters) == 1 else BeardJonesBank(filters)
+
+
+def make_lmi_detection(model: LinearModel, fault: str | None = None, h_radps: float = 20.0, epsilon: float = 1e-7,
+                       method: str = "least-squares", dt_s: float | None = None, sensor_std: Any = None,
+                       alpha: float = 1e-3) -> LmiDetectionFilter:
+    """LMI-optimal detection filter (continuous design, ZOH runtime) for one actuator fault."""
+    if model.is_discrete:
+        raise DesignError("lmi-detection-v1 is designed on a continuous model; pass the continuous linearization")
+    fault = fault or _controls(model)[0]
+    R = _diag(sensor_std, model.n_outputs, "sensor_std")
+    design = design_lmi_filter(model, fault, R, h_radps, epsilon=epsilon, method=method)  # V = R as noise weighting
+    return LmiDetectionFilter(model, design, fault, _dt(model, dt_s), alpha=alpha, Rd=R)
+
+
+def make_kalman(model: LinearModel, process_std: Any = None, sensor_std: Any = None, dt_s: float | None = None,
+                alpha: float = 1e-3, test: str = "nis", window_n: int = 200, n_lags: int = 5) -> KalmanInnovationDetector:
+    """Steady-state Kalman filter with the NIS, bias or whiteness test."""
+    md = _discrete(model, dt_s)
+    design = steady_state_kalman(md, _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std"))
+    return KalmanInnovationDetector(design, alpha, test, window_n, n_lags, id="kalman-nis-v1")  # type: ignore[arg-type]
+
+
+def make_kalman_tv(model: LinearModel, process_std: Any = None, sensor_std: Any = None, dt_s: float | None = None,
+                   alpha: float = 1e-3) -> TimeVaryingKalmanDetector:
+    """Time-varying Kalman filter (covariance recursion) with the NIS test; ``set_model`` re-schedules it."""
+    md = _discrete(model, dt_s)
+    return TimeVaryingKalmanDetector(md, _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std"), alpha=alpha)
+
+
+def make_mmae(model: LinearModel, alternatives: Mapping[str, LinearModel] | None = None, process_std: Any = None,
+              sensor_std: Any = None, dt_s: float | None = None, alarm_probability: float = 0.95, p_min: float = 1e-4) -> MultipleModelBank:
+    """Multiple-model bank: ``model`` is the nominal hypothesis, ``alternatives`` the others (e.g. ``{"iced": ...}``)."""
+    if not alternatives:
+        raise DesignError("kalman-mmae-v1 needs alternatives={'name': LinearModel, ...} besides the nominal model")
+    models = {"nominal": model, **dict(alternatives)}
+    designs = []
+    for name, m in models.items():
+        md = _discrete(m, dt_s)
+        designs.append(steady_state_kalman(md, _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std")))
+    return MultipleModelBank(designs, list(models), 0, p_min, alarm_probability)
+
+
+def make_adaptive_observer(model: LinearModel, adapt_A: Sequence[tuple[str, str]] | None = None,
+                           adapt_B: Sequence[tuple[str, str]] | None = None, m_gain: Any = 0.1, n_gain: Any = 0.1,
+                           process_std: Any = None, sensor_std: Any = None, dt_s: float | None = None,
+                           alpha: float = 1e-3) -> AdaptiveObserver:
+    """Sidar's adaptive observer on the discrete Kalman filter (eq. 23); entries to adapt by (row, column) names.
+
+    Default: the rows and columns of the measured states of ``A`` and the control columns of ``B``.
+    """
+    md = _discrete(model, dt_s)
+    design = steady_state_kalman(md, _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std"))
+    sn, inn = list(md.state_names), list(md.input_names)
+    mask_A = np.zeros((md.n_states, md.n_states), bool)
+    mask_B = np.zeros((md.n_states, md.n_inputs), bool)
+    try:
+        if adapt_A is None:
+            seen = np.flatnonzero(np.linalg.norm(np.asarray(md.C), axis=0) > 0)
+            mask_A[np.ix_(seen, seen)] = True
+        for r, c in adapt_A or []:
+            mask_A[sn.index(r), sn.index(c)] = True
+        if adapt_B is None:
+            mask_B[:, md.control_columns()] = True
+        for r, c in adapt_B or []:
+            mask_B[sn.index(r), inn.index(c)] = True
+    except ValueError as exc:
+        raise DesignError(f"unknown signal name in adapt_A/adapt_B ({exc}); states {sn}, inputs {inn}") from exc
+    gains = choose_sidar_gains(md.A, design.predictor_gain, md.C, m_gain, n_gain, 1.0, 1.0, mask_A, mask_B, dt_s=md.dt_s)
+    return AdaptiveObserver(md, design.predictor_gain, gains.M, gains.N, mask_A, mask_B, S=design.S, alpha=alpha)
+
+
+register("detector", "beard-jones-v1", "Beard-Jones fault detection filter(s) for actuator faults (patent App. A)", make_beard_jones)
+register("detector", "lmi-detection-v1", "LMI-optimal LQ detection filter with eigenvector alignment (patent App. B)", make_lmi_detection)
+register("detector", "kalman-nis-v1", "Steady-state Kalman filter, NIS / bias / whiteness innovation tests (Sidar eq. 10)", make_kalman)
+register("detector", "kalman-tv-nis-v1", "Time-varying Kalman filter with the NIS chi-square test", make_kalman_tv)
+register("detector", "kalman-mmae-v1", "Multiple-model Kalman bank with hypothesis probabilities (select the model that fits)", make_mmae)
+register("detector", "adaptive-observer-v1", "Sidar's adaptive tracking observer; parameter estimates flag slow degradation", make_adaptive_observer)
