@@ -392,7 +392,10 @@ def _validation_info(results: Mapping[str, Any]) -> dict[str, Any]:
     out = {}
     for method, vr in results.items():
         w_out, w_val = vr.worst
+        wo = vr.nrmse_without(("throttle_cmd_norm",))
+        k = int(np.argmax(wo))
         out[method] = {"nrmse": [float(x) for x in vr.nrmse], "worst_output": w_out, "worst": w_val,
+                       "worst_without_throttle": float(wo[k]), "worst_output_without_throttle": vr.output_names[k],
                        "input_names": list(vr.input_names), "nrmse_pair": vr.nrmse_pair.tolist(),
                        "rms_nl": vr.rms_nl.tolist(), "passed": vr.passed(), "duration_s": vr.duration_s}
     return out

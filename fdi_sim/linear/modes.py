@@ -16,8 +16,9 @@ phugoid             longitudinal                  largest Vt + theta participati
 altitude            longitudinal                  h-dominated (density gradient) root
 dutch roll          lateral                       complex pair with largest beta + r share
                                                   (two real roots if none is complex)
-roll                lateral                       the faster of the remaining real roots
-spiral              lateral                       the slower of the remaining real roots
+roll                lateral                       the fastest remaining real root
+spiral              lateral                       the slowest remaining root (it can pair
+                                                  with the height mode: DHC-6 105 KCAS)
 heading             lateral                       psi-dominated (zero) root
 engine              engine states                 ``n1_pct`` / ``prop_rpm``
 ==================  ============================  ==========================================
@@ -219,15 +220,13 @@ def identify_modes(A: NDArray[np.float64], state_names: Sequence[str]) -> ModeTa
         named.append(("dutch roll", i, "lateral"))
         lat.remove(i)
     reals = sorted((i for i in lat if not is_pair(i)), key=lambda i: -abs(lam[i]))
-    if len(reals) >= 2:  # textbook order: roll subsidence fast, spiral slow
-        picks = [("roll", reals[0]), ("spiral", reals[-1])]
-    elif reals:  # one real root: whichever of p and phi participates more
-        i = reals[0]
-        picks = [("roll" if share(i, ("p_radps",)) >= share(i, ("phi_rad",)) else "spiral", i)]
-    else:
-        picks = []
-    for nm, i in picks:
-        named.append((nm, i, "lateral"))
+    if reals and (len(reals) >= 2 or share(reals[0], ("p_radps",)) >= share(reals[0], ("phi_rad",))):
+        named.append(("roll", reals[0], "lateral"))  # textbook: roll subsidence is the fast real root
+        lat.remove(reals[0])
+    # spiral: the slowest remaining lateral root, real or (coupled with the height mode) a pair
+    if lat:
+        i = min(lat, key=lambda i: (abs(lam[i]), -share(i, ("phi_rad",))))
+        named.append(("spiral", i, "lateral"))
         lat.remove(i)
     named += [("other", i, "lateral") for i in lat]
     named += [("engine", i, "engine") for i in groups["engine"]]

@@ -91,6 +91,17 @@ def nrmse(y_lin: NDArray[np.float64], y_nl: NDArray[np.float64], axis: int | tup
         return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf)
 
 
+def aggregate(nrmse_pair: NDArray[np.float64], rms_nl: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per-output error over several equally long runs from their per-run errors and RMS [-].
+
+    ``sum_k e^2 = N (nrmse_r rms_r)^2`` and ``sum_k y^2 = N rms_r^2`` for each run ``r``.
+    """
+    err = np.nan_to_num(np.asarray(nrmse_pair) * np.asarray(rms_nl), posinf=0.0)
+    den = np.sqrt(np.sum(np.asarray(rms_nl) ** 2, axis=0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, np.sqrt(np.sum(err**2, axis=0)) / np.where(den > 0, den, 1.0), np.inf)
+
+
 @dataclass(frozen=True, eq=False)
 class ValidationResult:
     """Linear against nonlinear doublet responses at one operating point.
@@ -134,6 +145,11 @@ class ValidationResult:
     def passed(self, bar: float = NRMSE_BAR) -> bool:
         """Every output's aggregate error below ``bar``."""
         return bool(np.all(self.nrmse < bar))
+
+    def nrmse_without(self, inputs: Sequence[str]) -> NDArray[np.float64]:
+        """Per-output aggregate error leaving out the runs on ``inputs`` [-]."""
+        keep = [i for i, n in enumerate(self.input_names) if n not in inputs]
+        return aggregate(self.nrmse_pair[keep], self.rms_nl[keep])
 
     def excited_pairs(self, rel: float = 0.1) -> NDArray[np.bool_]:
         """Runs that move an output by at least ``rel`` times its largest response over all runs."""

@@ -1,0 +1,215 @@
+"""The linearizer against JSBSim: FGLinearization, the notes' eigenvalues, physics checks, validation.
+
+One representative point per aircraft (F-16 10 kft / 400 KTAS, DHC-6 5000 ft / 120 KCAS); the
+full default grids are in ``test_grids_slow.py`` (``-m slow``).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.signal import cont2discrete
+
+from fdi_sim.aircraft import Aircraft, trim
+from fdi_sim.aircraft.linearize import FDSettings, capture_trim, central_difference, fglinearization
+from fdi_sim.errors import DesignError
+from fdi_sim.linear.grid import default_grid_path, load_grid, vc_from_vt
+from fdi_sim.linear.linearize import discretize, linearize, linearize_grid
+from fdi_sim.linear.modes import identify_modes, match_eigenvalues
+from fdi_sim.linear.validate import DoubletSpec, compare, default_doublets, fly_doublets, nrmse
+from fdi_sim.operating_point import OperatingPoint
+
+F16_OP = OperatingPoint("f16", 10000.0, vt_kts=400.0)
+DHC6_OP = OperatingPoint("DHC6", 5000.0, vc_kts=120.0)
+
+
+@pytest.fixture(scope="module")
+def f16():
+    ac = Aircraft("f16")
+    return ac, linearize(ac, F16_OP, check_fglin=True)
+
+
+@pytest.fixture(scope="module")
+def dhc6():
+    ac = Aircraft("DHC6")
+    return ac, linearize(ac, DHC6_OP)
+
+
+def test_f16_eigenvalues_match_fglinearization(f16) -> None:
+    """Issue 4 bar: within 5 % of FGLinearization (JSBSIM_NOTES 4.3 lists both sets).
+
+    The roll root differs by 5.0 %: FGLinearization reads the derivatives after one model pass,
+    where the roll-rate PID's derivative term (kd = -1.25e-3, divided by the 1/120 s step) still
+    sees the perturbation as a jump and cuts the roll loop's gain by kd 120 / kp = 5 %. Our
+    central differences settle five passes (the term is 0, as in the flown aircraft; see the next
+    test), so this one root is allowed 5.5 %.
+    """
+    _, lp = f16
+    A = lp.model.A
+    mt = identify_modes(A, lp.model.state_names)
+    ours = mt.eigenvalues()
+    j, rel = match_eigenvalues(ours, lp.fglin_eigs)
+    k = 0
+    for m in mt.modes:
+        span = 2 if m.is_pair else 1
+        r = float(np.max(rel[k:k + span]))
+        if abs(m.eigenvalue) > 1e-3:
+            assert r < (0.055 if m.name == "roll" else 0.05), (m.name, m.eigenvalue, r)
+        k += span
+    names = {m.name for m in mt.modes}
+    assert {"short period", "phugoid", "dutch roll", "roll", "spiral"} <= names
+    # the values of JSBSIM_NOTES 4.3, own-FD column
+    assert abs(mt.get("roll")[0].eigenvalue + 1.039) < 0.02
+    assert abs(mt.get("spiral")[0].eigenvalue + 0.0465) < 0.002
+    assert sorted(m.eigenvalue.real for m in mt.get("short period")) == pytest.approx([-10.56, -1.723], rel=0.01)
+
+
+def test_f16_model_fits_jsbsim_better_than_fglinearization(f16) -> None:
+    """On an aileron doublet flown in JSBSim, our roll response is closer than FGLinearization's."""
+    ac, lp = f16
+    ac2 = Aircraft("f16")
+    trim(ac2, F16_OP)
+    jl = fglinearization(ac2)
+    runs = fly_doublets(ac, lp.trim_state, [DoubletSpec("aileron_cmd_norm", 0.005)], ("p_radps", "phi_rad"))
+    u = runs.du[0]
+    iu = jl.u_names.index("DaCmd")
+    Ad, Bd, *_ = cont2discrete((jl.A, jl.B[:, [iu]], np.eye(len(jl.x_names)), np.zeros((len(jl.x_names), 1))),
+                               ac.dt_s, method="zoh")
+    x, xs = np.zeros(len(jl.x_names)), []
+    for uk in u:
+        xs.append(x.copy())
+        x = Ad @ x + Bd[:, 0] * uk
+    xs = np.array(xs)
+    ours = discretize(lp.model)
+    ip, iphi = ours.output_names.index("p_radps"), ours.output_names.index("phi_rad")
+    from fdi_sim.linear.validate import simulate_linear
+    U = np.zeros((len(u), ours.n_inputs))
+    U[:, ours.input_names.index("aileron_cmd_norm")] = u
+    y = simulate_linear(ours, U)
+    for col, ij, name in ((ip, jl.x_names.index("P"), "p"), (iphi, jl.x_names.index("Phi"), "phi")):
+        e_ours = float(nrmse(y[:, col], runs.dy[0][:, list(runs.output_names).index(ours.output_names[col])]))
+        e_fg = float(nrmse(xs[:, ij], runs.dy[0][:, list(runs.output_names).index(ours.output_names[col])]))
+        assert e_ours < e_fg, (name, e_ours, e_fg)
+        assert e_ours < 0.03
+
+
+def test_f16_gust_columns_mirror_the_velocity_columns(f16) -> None:
+    """Moments depend on the air-relative velocity only: dM/d(gust) = -dM/d(u, v, w) (body axes)."""
+    ac, _ = f16
+    tr = trim(ac, F16_OP)
+    bj = central_difference(ac, tr)
+    rows = [bj.state_names.index(s) for s in ("p_radps", "q_radps", "r_radps")]
+    B_g = bj.B[np.ix_(rows, [bj.input_names.index(g) for g in ("u_gust_body_fps", "v_gust_body_fps", "w_gust_body_fps")])]
+    A_v = bj.A[np.ix_(rows, [0, 1, 2])]
+    scale = np.max(np.abs(A_v), axis=1, keepdims=True)
+    np.testing.assert_allclose(B_g / scale, -A_v / scale, atol=0.02)
+    # the centre evaluation reproduces the trim: accelerations near zero
+    assert np.max(np.abs(bj.xdot0[:3])) < 0.01 and np.max(np.abs(bj.xdot0[3:6])) < 1e-3
+    assert bj.knob_condition < 1e6
+
+
+def test_isa_calibrated_airspeed_matches_jsbsim(f16) -> None:
+    _, lp = f16
+    vc, mach = vc_from_vt(F16_OP.h_ft, F16_OP.vt_kts)
+    assert vc == pytest.approx(lp.trim["vc_kts"], rel=3e-3)
+    assert mach == pytest.approx(lp.trim["mach"], rel=3e-3)
+
+
+def test_dhc6_modes_match_the_notes(dhc6) -> None:
+    """JSBSIM_NOTES 4.3, DHC-6 5000 ft 120 KIAS, own FD after the running trim (beta -0.29 deg)."""
+    _, lp = dhc6
+    mt = identify_modes(lp.model.A, lp.model.state_names)
+    assert abs(mt.get("short period")[0].eigenvalue - complex(-2.260, 2.635)) / 3.47 < 0.01
+    assert abs(mt.get("dutch roll")[0].eigenvalue - complex(-0.411, 4.445)) / 4.46 < 0.01
+    assert mt.get("roll")[0].eigenvalue.real == pytest.approx(-5.560, rel=0.01)
+    # spiral: stable as the notes say for beta = -0.3 deg (-0.0225 with the engine frozen; our
+    # engine states move thrust and torque with airspeed, -0.019)
+    assert -0.03 < mt.get("spiral")[0].eigenvalue.real < -0.015
+    assert lp.model.state_names[-2:] == ("n1_pct", "prop_rpm")
+
+
+def test_dhc6_engine_rows_follow_the_engine_source(dhc6) -> None:
+    """FGTurboProp::Run: N1 -> IdleN1 + throttle N1_factor by ExpSeek with tau 1 s up, 2.4 s down
+    (PT6A-27.xml: idlen1 60, maxn1 100, n1idle_max_delay 1). The central difference averages the two."""
+    _, lp = dhc6
+    m = lp.model
+    i = m.state_names.index("n1_pct")
+    rate = 0.5 * (1 / 1.0 + 1 / 2.4)
+    assert m.A[i, i] == pytest.approx(-rate, rel=1e-3)
+    assert m.B[i, m.input_names.index("throttle_cmd_norm")] == pytest.approx(40.0 * rate, rel=1e-3)
+    others = np.delete(m.A[i], i)
+    assert np.max(np.abs(others)) < 1e-6
+
+
+def test_representative_points_validate(f16, dhc6) -> None:
+    """Small doublets, 10 s, per-output normalized RMS error (numbers in the report).
+
+    F-16: every output below 5 % except nx_g (5.2 % with ZOH; the FBW loops see their sensors one
+    step late in JSBSim, which the continuous model cannot show). DHC-6: with Euler (JSBSim's
+    integrator for rates and attitude) every output below 5 % leaving out the throttle doublet,
+    whose asymmetric N1 lag no linear model represents.
+    """
+    for (ac, lp), tol in ((f16, {"zoh": 0.055, "euler": 0.055}), (dhc6, {"euler": 0.05})):
+        g = load_grid(default_grid_path(ac.name), ac.name)
+        m = lp.model
+        runs = fly_doublets(ac, lp.trim_state, default_doublets(m, g.validation["amplitudes"]), m.output_names)
+        for meth, bar in tol.items():
+            vr = compare(discretize(m, ac.dt_s, method=meth), runs)
+            err = vr.nrmse if ac.name == "f16" else vr.nrmse_without(("throttle_cmd_norm",))
+            worst = {n: e for n, e in zip(vr.output_names, err) if e >= 0.05}
+            assert np.all(err < bar), (ac.name, meth, worst)
+            if ac.name == "f16":
+                assert set(worst) <= {"nx_g"}, worst
+        if ac.name == "DHC6":
+            vr = compare(discretize(m, ac.dt_s, method="euler"), runs)
+            assert vr.worst[1] > 0.3  # the throttle doublet: documented failure, must stay visible
+
+
+def test_untrimmable_and_skipped_points_say_why() -> None:
+    ac = Aircraft("DHC6")
+    lp = linearize(ac, OperatingPoint("DHC6", 5000.0, vc_kts=170.0))
+    assert lp.status == "untrimmable" and lp.reason and lp.model is None
+    lp = linearize(ac, OperatingPoint("DHC6", 5000.0, vc_kts=120.0, icing_eta=0.05))
+    assert lp.status == "skipped" and "icing overlay not available" in lp.reason
+    with pytest.raises(DesignError, match="operating point is for"):
+        linearize(ac, F16_OP)
+    with pytest.raises(DesignError, match="not reliable for the propeller"):
+        fglinearization(ac)
+
+
+def test_grid_reports_every_point() -> None:
+    from fdi_sim.linear.grid import parse_grid_spec
+
+    g = parse_grid_spec("h_ft=5000;vc_kts=120,140;icing_eta=0,0.05", "DHC6")
+    s = linearize_grid(g, validate=False)
+    assert [p.status for p in s.points] == ["ok", "skipped", "ok", "skipped"]
+    assert all(p.reason for p in s.points if p.status != "ok")
+    iced = type(g)("DHC6ice", tuple(OperatingPoint("DHC6ice", 5000.0, vc_kts=120.0, icing_eta=e) for e in (0, 0.05, 0.1)),
+                   g.envelope, g.validation, "test")
+    s2 = linearize_grid(iced, validate=False)
+    assert [p.status for p in s2.points] == ["skipped"] * 3
+    assert all("overlay not available" in p.reason for p in s2.points)
+
+
+def test_bad_fd_settings() -> None:
+    ac = Aircraft("f16")
+    tr = trim(ac, F16_OP)
+    with pytest.raises(DesignError, match="FDSettings.engine"):
+        central_difference(ac, tr, FDSettings(engine="jet"))
+    with pytest.raises(DesignError, match="no property"):
+        central_difference(ac, tr, extra_disturbances={"x": ("fcs/no-such-thing", 0.1)})
+    ts = capture_trim(ac, tr)
+    assert ts.n1_pct == 0.0  # quasi-static engine: nothing to restore
+
+
+def test_extra_disturbance_column_from_a_property() -> None:
+    """The mechanism the icing direction will use (a model property as a disturbance column), on the
+    DHC-6 speed brake: CDsb = 0.028 per unit with no lift, so du/dt = -qbar S 0.028 cos(alpha) / m."""
+    ac = Aircraft("DHC6")
+    tr = trim(ac, DHC6_OP)
+    qbar, S, m = ac["aero/qbar-psf"], ac["metrics/Sw-sqft"], ac["inertia/mass-slugs"]
+    bj = central_difference(ac, tr, extra_disturbances={"speedbrake_pos_norm": ("fcs/speedbrake-pos-norm", 0.01)})
+    j = bj.input_names.index("speedbrake_pos_norm")
+    assert bj.input_kinds[j] == "disturbance"
+    expected = -qbar * S * 0.028 * np.cos(tr.alpha_rad) / m
+    assert bj.B[0, j] == pytest.approx(expected, rel=0.03)
+    assert "icing_eta" not in bj.input_names and any("icing/eta" in n for n in bj.notes)
