@@ -38,7 +38,7 @@ def test_uvw_jacobian_matches_numerical_derivative(u: float, v: float, w: float)
     x0 = np.array([u, v, w])
     h = 1e-4
     Jn = np.column_stack([(_aero(x0 + h * e) - _aero(x0 - h * e)) / (2 * h) for e in np.eye(3)])
-    np.testing.assert_allclose(J, Jn, rtol=1e-6, atol=1e-10)
+    np.testing.assert_allclose(J, Jn, rtol=1e-6, atol=1e-8)
 
 
 def _random_body(rng: np.random.Generator, m: int = 3, p: int = 4) -> BodyJacobians:
