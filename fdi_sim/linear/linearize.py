@@ -133,9 +133,8 @@ def select(model: LinearModel, outputs: Sequence[str] | None = None, inputs: Seq
 def drop_states(model: LinearModel, names: Sequence[str], rtol: float = 1e-3) -> LinearModel:
     """Remove states that no other state and no output depends on (e.g. ``psi_rad`` when heading is unused).
 
-    A state ``j`` may be dropped only if column ``j`` of ``A`` (other rows) and of ``C`` is
-    negligible: ``|A[i, j]| * scale_j <= rtol * max|A[i, :] * scale|`` with the trim values as
-    scales would be fragile, so the test is simply relative to the row norms.
+    A state ``j`` may be dropped only if column ``j`` of ``A`` (rows of the kept states) and of
+    ``C`` is negligible: ``|M[i, j]| <= rtol * max_k |M[i, k]|`` for every such row ``i``.
 
     Raises
     ------
