@@ -1,19 +1,42 @@
 """The autopilot: altitude, airspeed and heading (or bank) holds, flying on the measurements.
 
-Control laws (all deviations about the trim commands; angles in rad, rates in rad/s):
+Control laws (deviations about the trim commands; angles in rad, rates in rad/s, energies per
+unit weight in ft, energy rates in ft/s; positive elevator is nose down on both aircraft):
 
-* altitude:  hdot_cmd = sat(k_h e_h) + hdot_ff,  theta_cmd = theta_0 + k_hdot (hdot_cmd - hdot)
-  + k_hi int(e_h) + k_turn (1/cos(phi) - 1),  elevator = e_0 - (k_theta (theta_cmd - theta) - k_q q)
-  (positive elevator is nose down on both aircraft);
-* airspeed:  throttle = t_0 + k_v e_v + k_vi int(e_v), e_v = v_ref - v_hat [kt], where v_hat is a
-  complementary filter of the measured airspeed and the longitudinal accelerometer,
-  dv_hat/dt = g (n_x - sin(theta)) + (v_meas - v_hat) / tau_v, as autothrottles use so that
-  they hold the speed through the air mass and do not chase gusts;
+* speed estimate. The hold is judged against the steady air mass, so the autopilot must not
+  chase the longitudinal gust that the air data sees. A second-order complementary filter
+  blends the measured airspeed (low frequencies) with the inertial acceleration along the
+  flight path (high frequencies) and estimates the acceleration bias, so that no steady speed
+  error is left: a_m is the specific force rotated by roll and pitch into the level,
+  heading-aligned frame, plus gravity, projected on (heading, gamma = asin(hdot / V_0)):
+  a_m = g [(cos th n_x + sin th n_zl) cos gamma - (cos th n_zl - sin th n_x + 1) sin gamma],
+  n_zl = cos phi n_z + sin phi n_y. With v_m = r vc (r = TAS/CAS at the trim point, ISA):
+  dv_hat/dt = a_m - b + 2 zeta (v_m - v_hat) / tau_v,  db/dt = -(v_m - v_hat) / tau_v^2.
+  a = a_m - b, low-passed with tau_acc, is the acceleration fed back below.
+* longitudinal, total energy control (TECS, Lambregts 1983) when both holds are engaged:
+  hdot_c = sat(k_h e_h + hdot_ff, hdot_min, hdot_max),  vdot_c = sat(k_v e_v, vdot_max),
+  pe = hdot_c - hdot,  ke = (V_0 / g) (vdot_c - a)  (potential and kinetic energy-rate errors),
+  throttle = t_0 + k_te_p (pe + ke) + k_te_i int(pe + ke)            (total energy: thrust),
+  theta_c  = theta_0 + k_eb_p B + k_eb_i int(B) + k_turn (1/cos(phi) - 1),
+  B = (2 - w_v) pe - w_v ke                                           (energy balance: pitch),
+  elevator = e_0 - (k_theta (theta_c - theta) - k_q q).
+  The throttle answers every loss of total energy (downdraft, pull-up, drag) before the speed
+  has changed, and the elevator trades height for speed. w_v (0 height only .. 2 speed only)
+  moves from w_speed to w_speed_sat while the throttle sits at a stop: it decides where an
+  energy deficit or surplus that the thrust cannot cover goes. With the altitude hold off the
+  elevator stays at trim and the throttle holds the speed (pe = 0); with the airspeed hold off
+  the throttle stays at trim and the elevator holds the height (B = pe).
+* envelope protection on the pitch command (limits +-theta_lim about trim): the nose-down
+  authority fades when the measured airspeed (low-passed with tau_vlim) is more than v_lim
+  above the reference, the nose-up authority when it is more than v_lim below, or when the
+  angle-of-attack vane (low-passed) comes within alpha_band of alpha_max.
 * lateral:   phi_cmd = sat(k_psi wrap(psi_ref - psi)) in heading mode or phi_ref in a turn,
-  aileron = a_0 + k_phi (phi_cmd - phi) - k_p p + k_phii int(phi_cmd - phi);
-* yaw damper: rudder = r_0 + k_r r_wo, r_wo the yaw rate through a washout of tau_wo.
+  aileron = a_0 + k_phi (phi_cmd - phi) - k_p p + k_phii int(phi_cmd - phi) - k_absbeta |beta|
+  (the last term cancels a rolling moment even in sideslip, see the DHC-6 gains);
+* yaw:       rudder = r_0 + k_r r_wo - k_beta beta, r_wo the yaw rate through a washout tau_wo.
 
-Gains per aircraft live in ``aircraft/<name>/autopilot.toml`` with the reasoning.
+Gains per aircraft live in ``aircraft/<name>/autopilot.toml`` with the reasoning. The step is
+pure-Python scalar arithmetic (the measurement vector is converted to a list once per step).
 """
 from __future__ import annotations
 
@@ -27,12 +50,27 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.pilot.maneuvers import AXES, HeadingChange, PulseTrain, RefRamp, Turn
-from fdi_sim.units import G0_FPS2, KT_PER_FPS, RAD_PER_DEG
+from fdi_sim.units import FPS_PER_KT, G0_FPS2, RAD_PER_DEG
 
 AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
 BLOCK_STEPS = 120  # maneuver tables are evaluated one block of steps at a time
 #: measurements the autopilot flies on
-NEEDED = ("h_ft", "hdot_fps", "vc_kts", "theta_rad", "q_radps", "phi_rad", "p_radps", "psi_rad", "r_radps", "nx_g")
+NEEDED = ("h_ft", "hdot_fps", "vc_kts", "theta_rad", "q_radps", "phi_rad", "p_radps", "psi_rad", "r_radps", "nx_g", "ny_g",
+          "nz_g", "alpha_rad")
+
+# ISA sea level (troposphere) for the TAS/CAS ratio: speed of sound [ft/s], lapse factor [1/ft]
+_A0_FPS = 1116.45
+_ISA_K_PER_FT = 6.87559e-6
+
+
+def tas_fps(h_ft: float, vc_kts: float) -> float:
+    """True airspeed [ft/s] at pressure altitude ``h_ft`` [ft] for calibrated airspeed ``vc_kts`` (ISA, subsonic)."""
+    th = 1.0 - _ISA_K_PER_FT * min(h_ft, 36089.0)  # temperature ratio
+    delta = th**5.25588  # pressure ratio
+    vc = vc_kts * FPS_PER_KT / _A0_FPS
+    qc_p = ((1.0 + 0.2 * vc * vc) ** 3.5 - 1.0) / delta  # impact pressure / static pressure
+    mach = math.sqrt(5.0 * ((qc_p + 1.0) ** (2.0 / 7.0) - 1.0))
+    return mach * _A0_FPS * math.sqrt(th)
 
 
 @dataclass(frozen=True)
@@ -41,45 +79,79 @@ class AutopilotGains:
 
     Attributes
     ----------
-    k_h_per_s : altitude error to climb-rate command [1/s]
-    hdot_max_fps : climb-rate command limit [ft/s]
-    k_hdot_rad_per_fps : climb-rate error to pitch command [rad/(ft/s)]
-    k_hi_rad_per_ft_s : altitude-error integral to pitch command [rad/(ft s)]
+    k_h_per_s : altitude error to climb-rate demand [1/s]
+    hdot_max_fps : limit of the climb-rate demand, maneuver feedforward included [ft/s]
+    hdot_min_fps : limit of the descent-rate demand (negative) [ft/s]
+    k_v_per_s : speed error to acceleration demand [1/s]
+    vdot_max_fps2 : limit of the acceleration demand [ft/s^2]
+    k_te_p_per_fps : total-energy-rate error to throttle [1/(ft/s)]
+    k_te_i_per_ft : integral of the total-energy-rate error to throttle [1/ft]
+    k_eb_p_rad_per_fps : energy-balance-rate error to pitch command [rad/(ft/s)]
+    k_eb_i_rad_per_ft : integral of the energy-balance-rate error to pitch command [rad/ft]
+    w_speed : speed weight of the energy balance, 0 (height only) .. 2 (speed only) [-]
+    w_speed_sat : speed weight while the throttle is at a stop and cannot supply the energy [-]
+    tau_sat_s : time constant of the blend between the two speed weights [s]
+    v_band_kt : airspeed band over which the pitch authority fades (envelope protection) [kt]
+    tau_vlim_s : low-pass time constant of the measured airspeed and angle of attack used by
+        the protections [s]
+    alpha_max_rad : angle of attack (vane, low-passed) at which the nose-up pitch authority is gone [rad]
+    alpha_band_rad : band below alpha_max over which the nose-up authority fades [rad]
+    v_lim_kt : measured-airspeed deviation (low-passed) beyond which the pitch authority
+        toward a larger deviation fades (overspeed / underspeed protection) [kt]
     k_turn_rad : pitch added in a bank per unit (1/cos(phi) - 1) [rad]
     theta_lim_rad : pitch command limit about trim [rad]
     k_theta : pitch error to elevator [1/rad]
     k_q : pitch rate to elevator [s/rad]
-    k_v_per_kt : airspeed error to throttle [1/kt]
-    k_vi_per_kt_s : airspeed-error integral to throttle [1/(kt s)]
     k_psi : heading error to bank command [-]
     phi_max_rad : bank command limit [rad]
     k_phi : bank error to aileron [1/rad]
     k_p : roll rate to aileron [s/rad]
     k_phii : bank-error integral to aileron [1/(rad s)]
+    k_absbeta : aileron per rad of |sideslip| (compensates a rolling moment even in beta) [1/rad]
     k_r : washed-out yaw rate to rudder [s/rad]
+    k_beta : sideslip to rudder (directional stiffness) [1/rad]
     tau_wo_s : yaw-damper washout time constant [s]
-    tau_v_s : time constant of the airspeed complementary filter [s]
-    throttle_max_norm : throttle limit [-]
+    tau_v_s : natural period / (2 pi) of the airspeed complementary filter, 1/omega [s]
+    zeta_v : damping ratio of the airspeed complementary filter [-]
+    tau_acc_s : low-pass time constant of the acceleration used in the energy-rate feedback [s]
+    throttle_min_norm : throttle lower limit [-]
+    throttle_max_norm : throttle upper limit [-]
     """
 
     k_h_per_s: float
     hdot_max_fps: float
-    k_hdot_rad_per_fps: float
-    k_hi_rad_per_ft_s: float
+    hdot_min_fps: float
+    k_v_per_s: float
+    vdot_max_fps2: float
+    k_te_p_per_fps: float
+    k_te_i_per_ft: float
+    k_eb_p_rad_per_fps: float
+    k_eb_i_rad_per_ft: float
+    w_speed: float
+    w_speed_sat: float
+    tau_sat_s: float
+    v_band_kt: float
+    v_lim_kt: float
+    tau_vlim_s: float
+    alpha_max_rad: float
+    alpha_band_rad: float
     k_turn_rad: float
     theta_lim_rad: float
     k_theta: float
     k_q: float
-    k_v_per_kt: float
-    k_vi_per_kt_s: float
     k_psi: float
     phi_max_rad: float
     k_phi: float
     k_p: float
     k_phii: float
+    k_absbeta: float
     k_r: float
+    k_beta: float
     tau_wo_s: float
     tau_v_s: float
+    zeta_v: float
+    tau_acc_s: float
+    throttle_min_norm: float
     throttle_max_norm: float
 
     @classmethod
@@ -157,11 +229,12 @@ class Pilot:
 
     def __init__(self, gains: AutopilotGains, modes: AutopilotModes, trim: TrimPoint, maneuvers: Sequence[object],
                  measurement_names: Sequence[str], dt_s: float) -> None:
-        missing = [n for n in NEEDED if n not in measurement_names]
+        needed = NEEDED + (("beta_rad",) if (gains.k_absbeta or gains.k_beta) else ())
+        missing = [n for n in needed if n not in measurement_names]
         if missing and (modes.altitude or modes.airspeed or modes.lateral):
             raise ValueError(f"the autopilot needs the measurements {missing}")
         self.g, self.modes, self.trim, self.dt_s = gains, modes, trim, dt_s
-        self.idx = {n: measurement_names.index(n) for n in NEEDED if n in measurement_names}
+        self.idx = {n: measurement_names.index(n) for n in needed if n in measurement_names}
         self.sticks = [m for m in maneuvers if isinstance(m, PulseTrain)]
         self.ramps = sorted((m for m in maneuvers if isinstance(m, RefRamp)), key=lambda m: m.t_start_s)
         self.headings = sorted((m for m in maneuvers if isinstance(m, HeadingChange)), key=lambda m: m.t_start_s)
@@ -176,20 +249,30 @@ class Pilot:
                 if q in prev:
                     start = float(q.apply(np.array([r.t_start_s]), np.array([start]), s)[0])
             self._ramp_start.append(start)
+        # energy scaling from the trim point: true airspeed V_0 [ft/s], TAS per kt of CAS [ft/s/kt]
+        self._v0_fps = tas_fps(trim.h_ft, trim.vc_kts)
+        self._fps_per_kcas = self._v0_fps / trim.vc_kts
+        self._ke_s = self._v0_fps / G0_FPS2  # V_0 / g: kinetic energy height per ft/s of speed [s]
         self.reset()
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Clear integrators and filters (the pilot is deterministic; ``rng`` is unused)."""
-        self._int_h = self._int_v = self._int_phi = 0.0
+        self._int_e = self._int_b = self._int_phi = 0.0
         self._r_wo_state = 0.0
+        self._v_hat = self._fps_per_kcas * self.trim.vc_kts
+        self._acc_bias = 0.0
+        self._acc_lp = 0.0
+        self._sat = 0.0
         self._vc_lp = self.trim.vc_kts
+        self._alpha_lp = 0.0
+        self._first = True  # the angle-of-attack filter starts from the first measurement
         self._psi_hold = self.trim.psi_rad
         self._in_turn = False
         self._block_start = -(10**9)
-        self._tab: NDArray[np.float64] = np.zeros((0, 8))
+        self._rows: list[list[float]] = []
 
     def _fill_block(self, k0: int) -> None:
-        """Tables for steps k0 .. k0+BLOCK_STEPS-1: [de, da, dr, dt, h_ref, hdot_ff, vc_ref, turn_phi(or nan)]."""
+        """Rows for steps k0 .. k0+BLOCK_STEPS-1: [de, da, dr, dt, h_ref, hdot_ff, vc_ref, turn_phi(or nan)]."""
         t = (k0 + np.arange(BLOCK_STEPS)) * self.dt_s
         tab = np.zeros((BLOCK_STEPS, 8))
         for m in self.sticks:
@@ -210,7 +293,7 @@ class Pilot:
         for tr in self.turns:
             turn_phi[(t >= tr.t_start_s) & (t < tr.t_start_s + tr.duration_s)] = tr.phi_deg * RAD_PER_DEG
         tab[:, 7] = turn_phi
-        self._tab, self._block_start = tab, k0
+        self._rows, self._block_start = tab.tolist(), k0  # Python floats: scalar maths per step stays cheap
 
     def _psi_ref(self, t_s: float) -> float:
         psi = self._psi_hold
@@ -224,55 +307,110 @@ class Pilot:
         k = int(round(t_s / self.dt_s))
         if not (self._block_start <= k < self._block_start + BLOCK_STEPS):
             self._fill_block(k)
-        row = self._tab[k - self._block_start]
-        g, tr, dt, ix = self.g, self.trim, self.dt_s, self.idx
-        de, da, dr, dthr, h_ref, hdot_ff, vc_ref, turn_phi = row
+        de, da, dr, dthr, h_ref, hdot_ff, vc_ref, turn_phi = self._rows[k - self._block_start]
+        g, tr, dt, ix, modes = self.g, self.trim, self.dt_s, self.idx, self.modes
+        ym = y.tolist()
         elev, ail, rud, thr = tr.elevator_cmd_norm, tr.aileron_cmd_norm, tr.rudder_cmd_norm, tr.throttle_cmd_norm
         phi_ref = 0.0
         psi_ref = self._psi_ref(t_s)
-        if self.modes.lateral:
-            phi, p, r = y[ix["phi_rad"]], y[ix["p_radps"]], y[ix["r_radps"]]
+        if modes.lateral:
+            phi, p, r = ym[ix["phi_rad"]], ym[ix["p_radps"]], ym[ix["r_radps"]]
             if turn_phi == turn_phi:  # not NaN: in a turn
                 self._in_turn = True
                 phi_cmd = phi_ref = turn_phi
             else:
                 if self._in_turn:  # leaving a turn: hold the heading reached
                     self._in_turn = False
-                    self._psi_hold = y[ix["psi_rad"]]
+                    self._psi_hold = ym[ix["psi_rad"]]
                     self.headings = [h for h in self.headings if h.t_start_s > t_s]
                     psi_ref = self._psi_hold
-                e_psi = _wrap(psi_ref - y[ix["psi_rad"]])
+                e_psi = _wrap(psi_ref - ym[ix["psi_rad"]])
                 phi_cmd = phi_ref = max(-g.phi_max_rad, min(g.phi_max_rad, g.k_psi * e_psi))
             e_phi = phi_cmd - phi
             self._int_phi += e_phi * dt
             ail += g.k_phi * e_phi - g.k_p * p + g.k_phii * self._int_phi
+            if g.k_absbeta:
+                ail -= g.k_absbeta * abs(ym[ix["beta_rad"]])
             # washout r_wo = tau s / (1 + tau s) r = r - x, with the low-pass x' = (r - x) / tau (Euler)
             r_wo = r - self._r_wo_state
             self._r_wo_state += dt * r_wo / g.tau_wo_s
             rud += g.k_r * r_wo
-        else:
-            phi = tr.phi_rad
-        if self.modes.altitude:
-            e_h = h_ref - y[ix["h_ft"]]
-            self._int_h += e_h * dt
-            hdot_cmd = max(-g.hdot_max_fps, min(g.hdot_max_fps, g.k_h_per_s * e_h)) + hdot_ff
-            cphi = max(math.cos(y[ix["phi_rad"]]), 0.5)
-            dtheta = (g.k_hdot_rad_per_fps * (hdot_cmd - y[ix["hdot_fps"]]) + g.k_hi_rad_per_ft_s * self._int_h
-                      + g.k_turn_rad * (1.0 / cphi - 1.0))
-            dtheta = max(-g.theta_lim_rad, min(g.theta_lim_rad, dtheta))
-            theta_cmd = tr.theta_rad + dtheta
-            elev -= g.k_theta * (theta_cmd - y[ix["theta_rad"]]) - g.k_q * y[ix["q_radps"]]
-        if self.modes.airspeed:
-            # complementary filter: inertial acceleration at high frequency, airspeed at low frequency
-            acc_kts = G0_FPS2 * KT_PER_FPS * (y[ix["nx_g"]] - math.sin(y[ix["theta_rad"]]))
-            self._vc_lp += dt * (acc_kts + (y[ix["vc_kts"]] - self._vc_lp) / g.tau_v_s)
-            e_v = vc_ref - self._vc_lp
-            self._int_v += e_v * dt
-            thr += g.k_v_per_kt * e_v + g.k_vi_per_kt_s * self._int_v
-            # anti-windup: undo the integration when the throttle saturates
-            if thr > g.throttle_max_norm or thr < 0.0:
-                self._int_v -= e_v * dt
-                thr = max(0.0, min(g.throttle_max_norm, thr))
+            if g.k_beta:
+                rud -= g.k_beta * ym[ix["beta_rad"]]
+        if modes.altitude or modes.airspeed:
+            theta = ym[ix["theta_rad"]]
+            # acceleration along the flight path [ft/s^2] (module docstring), gamma from the baro climb rate
+            sth, cth = math.sin(theta), math.cos(theta)
+            phi_m, nx = ym[ix["phi_rad"]], ym[ix["nx_g"]]
+            nzl = math.cos(phi_m) * ym[ix["nz_g"]] + math.sin(phi_m) * ym[ix["ny_g"]]
+            sg = max(-0.5, min(0.5, ym[ix["hdot_fps"]] / self._v0_fps))  # clipped: a faulty hdot cannot break it
+            acc = G0_FPS2 * ((cth * nx + sth * nzl) * math.sqrt(1.0 - sg * sg) - (cth * nzl - sth * nx + 1.0) * sg)
+            acc -= self._acc_bias
+            # second-order complementary filter: speed [ft/s TAS scale] and acceleration bias [ft/s^2]
+            vc_m = ym[ix["vc_kts"]]
+            e_f = self._fps_per_kcas * vc_m - self._v_hat
+            self._v_hat += dt * (acc + 2.0 * g.zeta_v * e_f / g.tau_v_s)
+            self._acc_bias -= dt * e_f / (g.tau_v_s * g.tau_v_s)
+            self._acc_lp += dt * (acc - self._acc_lp) / g.tau_acc_s
+            acc = self._acc_lp
+            # protections' inputs: low-passed measured airspeed [kt] and angle of attack [rad]
+            alpha_m = ym[ix["alpha_rad"]]
+            if self._first:
+                self._first, self._alpha_lp = False, alpha_m
+            self._vc_lp += dt * (vc_m - self._vc_lp) / g.tau_vlim_s
+            self._alpha_lp += dt * (alpha_m - self._alpha_lp) / g.tau_vlim_s
+            # energy-rate errors [ft/s]: potential (climb rate) and kinetic ((V_0/g) acceleration)
+            pe = ke = 0.0
+            if modes.altitude:
+                hdot_c = g.k_h_per_s * (h_ref - ym[ix["h_ft"]]) + hdot_ff
+                hdot_c = max(g.hdot_min_fps, min(g.hdot_max_fps, hdot_c))
+                pe = hdot_c - ym[ix["hdot_fps"]]
+            if modes.airspeed:
+                e_v = self._fps_per_kcas * vc_ref - self._v_hat
+                vdot_c = max(-g.vdot_max_fps2, min(g.vdot_max_fps2, g.k_v_per_s * e_v))
+                ke = self._ke_s * (vdot_c - acc)
+                e_rate = pe + ke  # total energy rate error -> throttle
+                thr_u = thr + g.k_te_p_per_fps * e_rate + g.k_te_i_per_ft * (self._int_e + e_rate * dt)
+                sat = 0.0
+                if thr_u > g.throttle_max_norm:  # anti-windup: integrate only away from the stop
+                    thr = g.throttle_max_norm
+                    if e_rate < 0.0:
+                        self._int_e += e_rate * dt
+                    else:
+                        sat = 1.0
+                elif thr_u < g.throttle_min_norm:
+                    thr = g.throttle_min_norm
+                    if e_rate > 0.0:
+                        self._int_e += e_rate * dt
+                    else:
+                        sat = 1.0
+                else:
+                    thr = thr_u
+                    self._int_e += e_rate * dt
+                self._sat += dt * (sat - self._sat) / g.tau_sat_s
+            if modes.altitude:
+                w_v = g.w_speed + self._sat * (g.w_speed_sat - g.w_speed)
+                b_rate = (2.0 - w_v) * pe - w_v * ke if modes.airspeed else pe  # energy balance rate error
+                cphi = max(math.cos(ym[ix["phi_rad"]]), 0.5)
+                dtheta = (g.k_eb_p_rad_per_fps * b_rate + g.k_eb_i_rad_per_ft * (self._int_b + b_rate * dt)
+                          + g.k_turn_rad * (1.0 / cphi - 1.0))
+                # pitch limits about trim; the side that would make an over/underspeed worse fades out
+                over = (self._vc_lp - vc_ref - g.v_lim_kt) / g.v_band_kt
+                under = (vc_ref - self._vc_lp - g.v_lim_kt) / g.v_band_kt
+                lim_dn = g.theta_lim_rad * (1.0 - min(max(over, 0.0), 1.0))
+                stall = (self._alpha_lp - g.alpha_max_rad) / g.alpha_band_rad + 1.0
+                lim_up = g.theta_lim_rad * (1.0 - min(max(under, stall, 0.0), 1.0))
+                if dtheta > lim_up:
+                    dtheta = lim_up
+                    if b_rate < 0.0:
+                        self._int_b += b_rate * dt
+                elif dtheta < -lim_dn:
+                    dtheta = -lim_dn
+                    if b_rate > 0.0:
+                        self._int_b += b_rate * dt
+                else:
+                    self._int_b += b_rate * dt
+                elev -= g.k_theta * (tr.theta_rad + dtheta - theta) - g.k_q * ym[ix["q_radps"]]
         return PilotCommand(
             t_s, max(-1.0, min(1.0, elev + de)), max(-1.0, min(1.0, ail + da)), max(-1.0, min(1.0, rud + dr)),
             max(0.0, min(1.0, thr + dthr)), h_ref, vc_ref, psi_ref, phi_ref,
