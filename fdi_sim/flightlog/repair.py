@@ -11,6 +11,7 @@ and footer is written with the same low-level writer as a normal run.
 from __future__ import annotations
 
 import io
+import json
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -158,6 +159,11 @@ def _scan(data: bytes) -> _Recovered:
                 break
             if opcode == _OP_SCHEMA:
                 s = Schema.read(stream(body))
+                # schema records carry no CRC: a damaged text schema must not reach the repaired file
+                if s.encoding in ("ros2msg", "jsonschema"):
+                    text = bytes(s.data).decode("utf-8")
+                    if s.encoding == "jsonschema":
+                        json.loads(text)
                 rec.schemas.setdefault(s.id, (s.name, s.encoding, bytes(s.data)))
             elif opcode == _OP_CHANNEL:
                 c = Channel.read(stream(body))
