@@ -23,8 +23,9 @@ turbulence = "moderate"
 """
 
 
-@pytest.mark.xfail(strict=False, reason="autopilot tuning in progress: measured F-16 6.0 kt airspeed, DHC-6 14.6 kt / 5.8 deg "
-                   "at seed 11 with the first gains (issue 2 stays open until this passes)")
+@pytest.mark.xfail(strict=False, reason="airspeed bar not met: at seed 11 the tuned autopilot holds altitude and bank with "
+                   "margin but airspeed misses by F-16 6.6 kt, DHC-6 10.5 kt; the speed estimate from this sensor suite "
+                   "(no GPS) alone errs 4-8 kt on the DHC-6 (issue 2 stays open)")
 @pytest.mark.parametrize("ac,h,speed", [
     ("f16", 10000.0, "vt_kts = 400.0"),
     ("DHC6", 5000.0, "vc_kts = 120.0"),
