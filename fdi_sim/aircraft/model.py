@@ -88,7 +88,6 @@ class Aircraft:
         self._pm = self.fdm.get_property_manager()
         self._map = property_map(name)
         self._node_cache: dict[str, object] = {}
-        self.frozen_nodes: dict[str, object] = {}
 
     # ------------------------------------------------------------------ properties
     def __getitem__(self, prop: str) -> float:
@@ -162,32 +161,6 @@ class Aircraft:
                     t(th)
 
         return write
-
-    # ------------------------------------------------------------------ write protection
-    def hold_property(self, prop: str, value: float | None = None) -> None:
-        """Hold a property at ``value`` (or its current value) against the FCS's writes.
-
-        JSBSIM_NOTES sec. 3.4: clearing the WRITE attribute makes the FCS's writes fail silently.
-        """
-        node = self.node(prop)
-        if value is not None:
-            node.set_attribute(jsbsim.Attribute.WRITE, True)
-            node.set_double_value(float(value))
-        node.set_attribute(jsbsim.Attribute.WRITE, False)
-        self.frozen_nodes[prop] = node
-
-    def force_property(self, prop: str, value: float) -> None:
-        """Write a held property (used each step by actuator faults)."""
-        node = self.frozen_nodes[prop]
-        node.set_attribute(jsbsim.Attribute.WRITE, True)
-        node.set_double_value(float(value))
-        node.set_attribute(jsbsim.Attribute.WRITE, False)
-
-    def release_property(self, prop: str) -> None:
-        """Give a held property back to the FCS."""
-        node = self.frozen_nodes.pop(prop, None)
-        if node is not None:
-            node.set_attribute(jsbsim.Attribute.WRITE, True)
 
     # ------------------------------------------------------------------ atmosphere and stepping
     def set_atmosphere(self, atm: Atmosphere, seed: int) -> None:

@@ -15,7 +15,7 @@ import contextlib
 import math
 import os
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import jsbsim
 import numpy as np
@@ -78,7 +78,6 @@ class TrimResult:
     psidot_radps: float
     residual: float
     method: str
-    extra: dict[str, float] = field(default_factory=dict)
 
     @property
     def u0(self) -> NDArray[np.float64]:
@@ -122,7 +121,7 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
         if jsb_error:
             raise TrimError(ac.name, op.label(), jsb_error)
         fdm.get_propulsion().get_steady_state()
-        res = _residual_now(ac)
+        res = float(np.max(np.abs(_tiny_step_accelerations(ac))))
         result = _result(ac, op, res, "jsbsim", psidot=_turn_rate(ac, op))
     else:
         fdm.get_propulsion().get_steady_state()  # avoid the N1 -> idle reset on the first step
@@ -172,16 +171,18 @@ def _turn_rate(ac: Aircraft, op: OperatingPoint) -> float:
     return G0_FPS2 * math.tan(op.phi_deg * RAD_PER_DEG) / max(ac["velocities/vt-fps"], 1.0)
 
 
-def _residual_now(ac: Aircraft) -> float:
-    """Weighted accelerations of a tiny real step from the current state (no state change kept)."""
+def _tiny_step_accelerations(ac: Aircraft) -> NDArray[np.float64]:
+    """Weighted body accelerations of a 1e-6 s real step from the current state.
+
+    At dt = 0 the turboprop gives no power (JSBSIM_NOTES sec. 0); a tiny real step includes the
+    engine torque while integrating a negligible amount.
+    """
     fdm = ac.fdm
     dt0 = fdm.get_delta_t()
-    # evaluating at dt=0 misses the turboprop torque; a 1e-6 s real step includes it
     fdm.set_dt(1e-6)
     fdm.run()
     fdm.set_dt(dt0)
-    acc = np.array([fdm[p] for p in _ACC]) * _ACC_W
-    return float(np.max(np.abs(acc)))
+    return np.array([fdm[p] for p in _ACC]) * _ACC_W
 
 
 # ---------------------------------------------------------------------- running-engine trim (DHC-6)
@@ -215,12 +216,7 @@ def _init_state(ac: Aircraft, st: dict[str, float], z: NDArray[np.float64]) -> N
 
 def _running_residual(ac: Aircraft, st: dict[str, float], z: NDArray[np.float64]) -> NDArray[np.float64]:
     _init_state(ac, st, z)
-    fdm = ac.fdm
-    dt0 = fdm.get_delta_t()
-    fdm.set_dt(1e-6)  # tiny REAL step: real engine torque, negligible integration
-    fdm.run()
-    fdm.set_dt(dt0)
-    return np.array([fdm[p] for p in _ACC]) * _ACC_W
+    return _tiny_step_accelerations(ac)
 
 
 def trim_running(ac: Aircraft, op: OperatingPoint, jsb_error: str = "") -> TrimResult:
@@ -229,10 +225,11 @@ def trim_running(ac: Aircraft, op: OperatingPoint, jsb_error: str = "") -> TrimR
     Starts from JSBSim's trim when it succeeded, else from a generic guess.
     """
     fdm = ac.fdm
-    vt_fps = fdm["velocities/vt-fps"] if op.vt_kts is None else op.speed_fps
     if op.vt_kts is None:
-        fdm["ic/vc-kts"] = op.vc_kts  # convert calibrated to true at this altitude
+        fdm["ic/vc-kts"] = op.vc_kts  # JSBSim converts calibrated to true airspeed at this altitude
         vt_fps = fdm["ic/vt-fps"]
+    else:
+        vt_fps = op.speed_fps
     psidot = G0_FPS2 * math.tan(op.phi_deg * RAD_PER_DEG) / vt_fps
     st = {
         "h_ft": op.h_ft, "vt_fps": vt_fps, "psi_rad": op.psi_deg * RAD_PER_DEG,
@@ -267,11 +264,10 @@ def trim_running(ac: Aircraft, op: OperatingPoint, jsb_error: str = "") -> TrimR
         z = np.clip(z + scale * step, lo, hi)
     res, z = best
     _init_state(ac, st, z)
-    return _result(ac, op, res, "running", psidot=psidot, z=z)
+    return _result(ac, op, res, "running", psidot=psidot)
 
 
-def _result(ac: Aircraft, op: OperatingPoint, res: float, method: str, psidot: float,
-            z: NDArray[np.float64] | None = None) -> TrimResult:
+def _result(ac: Aircraft, op: OperatingPoint, res: float, method: str, psidot: float) -> TrimResult:
     fdm = ac.fdm
     return TrimResult(
         op=op,

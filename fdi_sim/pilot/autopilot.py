@@ -237,17 +237,15 @@ class Pilot:
         self.idx = {n: measurement_names.index(n) for n in needed if n in measurement_names}
         self.sticks = [m for m in maneuvers if isinstance(m, PulseTrain)]
         self.ramps = sorted((m for m in maneuvers if isinstance(m, RefRamp)), key=lambda m: m.t_start_s)
-        self.headings = sorted((m for m in maneuvers if isinstance(m, HeadingChange)), key=lambda m: m.t_start_s)
+        self._headings = tuple(sorted((m for m in maneuvers if isinstance(m, HeadingChange)), key=lambda m: m.t_start_s))
         self.turns = sorted((m for m in maneuvers if isinstance(m, Turn)), key=lambda m: m.t_start_s)
-        # reference starting values of each ramp: the reference reached by the ramps before it
+        # each ramp starts from the reference that the earlier ramps of its channel reached by then
         self._ramp_start: list[float] = []
-        last = {"h_ft": trim.h_ft, "vc_kts": trim.vc_kts}
         for r in self.ramps:
-            prev = [q for q in self.ramps if q.channel == r.channel and q.t_start_s < r.t_start_s]
-            start = last[r.channel]
+            start = trim.h_ft if r.channel == "h_ft" else trim.vc_kts
             for q, s in zip(self.ramps, self._ramp_start):
-                if q in prev:
-                    start = float(q.apply(np.array([r.t_start_s]), np.array([start]), s)[0])
+                if q.channel == r.channel:
+                    start = q.value_at(r.t_start_s, s, start)
             self._ramp_start.append(start)
         # energy scaling from the trim point: true airspeed V_0 [ft/s], TAS per kt of CAS [ft/s/kt]
         self._v0_fps = tas_fps(trim.h_ft, trim.vc_kts)
@@ -268,6 +266,7 @@ class Pilot:
         self._first = True  # the angle-of-attack filter starts from the first measurement
         self._psi_hold = self.trim.psi_rad
         self._in_turn = False
+        self.headings = list(self._headings)  # heading changes still ahead (a turn exit drops past ones)
         self._block_start = -(10**9)
         self._rows: list[list[float]] = []
 

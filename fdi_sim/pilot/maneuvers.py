@@ -92,6 +92,10 @@ class RefRamp:
     target: float
     rate: float
 
+    def value_at(self, t_s: float, start_value: float, before: float) -> float:
+        """The reference at one time [channel units]: ``before`` until the start, then the ramp."""
+        return float(self.apply(np.array([t_s]), np.array([before]), start_value)[0])
+
     def apply(self, t_s: NDArray[np.float64], ref: NDArray[np.float64], start_value: float) -> NDArray[np.float64]:
         dt = np.maximum(t_s - self.t_start_s, 0.0)
         step = self.target - start_value

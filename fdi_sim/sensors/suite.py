@@ -115,29 +115,29 @@ class SensorSuite:
             if s.rate_hz <= 0 or abs(d - round(d)) > 1e-6 or round(d) < 1:
                 raise ValueError(f"sensor {s.name}: rate {s.rate_hz} Hz does not divide the simulation rate {sim_hz:g} Hz")
             decim.append(int(round(d)))
-        self._decim = np.array(decim)
-        period = math.lcm(*decim)
-        # which sensors sample at step k: _masks[k % period]
-        self._masks = [(k % self._decim) == 0 for k in range(period)]
-        self._all = [bool(m.all()) for m in self._masks]
-        self._period = period
+        self._period = math.lcm(*decim)
+        truth_idx = [list(truth_names).index(n) for n in self.names]
+        # per phase k % period: the sensors that sample, as (sensor, truth index, quantum) -- scalar Python
+        # per step is cheaper than half a dozen numpy calls on a 14-element vector
+        self._plan = [
+            [(i, truth_idx[i], specs[i].quantum) for i in range(len(specs)) if k % decim[i] == 0]
+            for k in range(self._period)
+        ]
         self._noise_std = np.array([s.noise_std for s in specs])
-        self._quantum = np.array([s.quantum for s in specs])
-        self._quantized = self._quantum > 0
-        self._q_safe = np.where(self._quantized, self._quantum, 1.0)
         self.reset(np.random.default_rng(0))
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Draw the turn-on biases and restart the noise stream from ``rng``."""
         self._rng = rng if rng is not None else np.random.default_rng(0)
         self.bias = np.array([s.bias + s.bias_std * self._rng.standard_normal() for s in self.specs])
-        self._y = np.zeros(len(self.specs))
+        self._y = [0.0] * len(self.specs)
         self._block_start = -(10**9)
-        self._offset = np.zeros((BLOCK_STEPS, len(self.specs)))
+        self._offset: list[list[float]] = []
 
     def _fill_block(self, k0: int) -> None:
         # bias + noise for the next block, drawn as one array (sampling instants only use their row)
-        self._offset = self.bias + self._noise_std * self._rng.standard_normal((BLOCK_STEPS, len(self.specs)))
+        off = self.bias + self._noise_std * self._rng.standard_normal((BLOCK_STEPS, len(self.specs)))
+        self._offset = off.tolist()
         self._block_start = k0
 
     def step(self, t_s: float, truth: NDArray[np.float64]) -> Measurement:
@@ -147,15 +147,10 @@ class SensorSuite:
         if not 0 <= j < BLOCK_STEPS:
             self._fill_block(k)
             j = 0
-        new = truth[self._idx] + self._offset[j]
-        if self._quantized.any():
-            new = np.where(self._quantized, np.round(new / self._q_safe) * self._q_safe, new)
-        p = k % self._period
-        if self._all[p]:
-            self._y = new
-        else:
-            m = self._masks[p]
-            y = self._y.copy()
-            y[m] = new[m]
-            self._y = y
-        return Measurement(t_s, self._y)
+        x = truth.tolist()
+        off = self._offset[j]
+        y = self._y
+        for i, ti, q in self._plan[k % self._period]:
+            v = x[ti] + off[i]
+            y[i] = round(v / q) * q if q else v  # sample, then hold until the next sample
+        return Measurement(t_s, np.array(y))
