@@ -28,11 +28,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         changes["duration_s"] = args.duration
     if changes:
         sc = sc.replace(**changes)
-    try:
-        res = run(sc, args.out, log_path=args.log, progress=None if not args.quiet else False)
-    except KeyboardInterrupt:
-        print("interrupted: the log was closed and is readable", file=sys.stderr)
-        return 1
+    res = run(sc, args.out, log_path=args.log, progress=None if not args.quiet else False)
     print(res.summary.format())
     print(f"log        {res.log_path}")
     return 0 if res.status == "completed" else 1
@@ -77,7 +73,7 @@ def _cmd_repair(args: argparse.Namespace) -> int:
     from fdi_sim.flightlog import repair_log
 
     rep = repair_log(args.log, args.out)
-    print(rep.format() if hasattr(rep, "format") else rep)
+    print(rep.format())
     return 0
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib.metadata
 import math
 import platform
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,12 +21,12 @@ import numpy as np
 
 from fdi_sim import registry
 from fdi_sim.aircraft import COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, trim
-from fdi_sim.errors import LogError, SimulationDiverged
+from fdi_sim.errors import LogError, ScenarioError, SimulationDiverged
 from fdi_sim.flightlog import FlightLogWriter
 from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimPoint
 from fdi_sim.scenario import Scenario
 from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
-from fdi_sim.units import DEG_PER_RAD, RAD_PER_DEG
+from fdi_sim.units import DEG_PER_RAD, FPS_PER_KT, RAD_PER_DEG
 
 #: topic names (DESIGN.md: topics by stage)
 TOPIC_TRUTH = "/truth/state"
@@ -139,8 +140,6 @@ def build_sensors(sc: Scenario, dt_s: float) -> SensorSuite:
     specs = load_suite(sc.aircraft, s.suite)
     unknown = [k for k in overrides if k not in {sp.name for sp in specs}]
     if unknown:
-        from fdi_sim.errors import ScenarioError
-
         raise ScenarioError(sc.source, f"sensors.overrides.{unknown[0]}", "no such sensor in the suite",
                             f"sensors are: {', '.join(sp.name for sp in specs)}")
     return SensorSuite(apply_overrides(specs, s.noise_scale, s.biases, overrides), TRUTH_SIGNALS, dt_s)
@@ -166,6 +165,8 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     RunResult
     """
     out = Path(log_path) if log_path is not None else _default_log_path(sc, Path(out_dir))
+    # one stream per component; the fault and FDI streams are spawned now so that adding faults or
+    # detectors to a scenario never changes the sensor noise or the turbulence of the same seed
     seeds = np.random.SeedSequence(sc.seed)
     ss_sensors, ss_pilot, ss_jsbsim, _ss_faults, _ss_fdi = seeds.spawn(5)
     jsbsim_seed = int(ss_jsbsim.generate_state(1)[0] % (2**31 - 1))
@@ -204,9 +205,6 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         ch_status.write(0.0, {"event": "start", "status": "running", "reason": tr.method + " trim", "t_s": 0.0})
         status, reason, t_s, k, stats = _loop(sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress)
         ch_status.write(t_s, {"event": "end", "status": status, "reason": reason, "t_s": t_s})
-    except KeyboardInterrupt:
-        status, reason = "interrupted", "stopped by the user (Ctrl-C)"
-        raise
     finally:
         writer.close()
     wall = time.perf_counter() - wall0
@@ -225,7 +223,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     read_truth = ac.reader(TRUTH_SIGNALS)
     read_surf = ac.reader(SURFACE_SIGNALS)
     write_cmd = ac.command_writer()
-    idx = {n: TRUTH_SIGNALS.index(n) for n in TRUTH_SIGNALS}
+    idx = {n: i for i, n in enumerate(TRUTH_SIGNALS)}
     i_h, i_vc, i_vt, i_phi, i_alpha, i_mach = idx["h_ft"], idx["vc_kts"], idx["vt_fps"], idx["phi_rad"], idx["alpha_rad"], idx["mach"]
     i_vn, i_ve, i_vd = idx["v_north_fps"], idx["v_east_fps"], idx["v_down_fps"]
     i_p, i_q, i_r = idx["p_radps"], idx["q_radps"], idx["r_radps"]
@@ -234,7 +232,6 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     phi_max, rate_max, vc_min = lim.phi_max_deg * RAD_PER_DEG, lim.rate_max_radps, lim.vc_min_kts
     atm = sc.model.atmosphere
     to = math.radians(atm.wind_from_deg + 180.0)
-    from fdi_sim.units import FPS_PER_KT
     wn, we = atm.wind_speed_kts * FPS_PER_KT * math.cos(to), atm.wind_speed_kts * FPS_PER_KT * math.sin(to)
     flaps_deg = sc.model.initial.flaps_deg
     dt = sc.dt_s
@@ -294,6 +291,8 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 last_shown = k
     except SimulationDiverged as exc:
         status, reason, t_s = "diverged", exc.reason, exc.t_s
+    except KeyboardInterrupt:  # end cleanly: the caller still gets a summary and a finished log
+        status, reason = "interrupted", "stopped by the user (Ctrl-C)"
     finally:
         if bar is not None:
             bar.close()
@@ -301,8 +300,6 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
 
 
 def _progress_bar(sc: Scenario, progress: bool | None):
-    import sys
-
     if progress is None:
         progress = sc.duration_s > 30 and sys.stderr.isatty()
     if not progress:

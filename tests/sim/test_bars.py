@@ -80,3 +80,24 @@ def test_divergence_ends_cleanly_with_readable_log(tmp_path: Path) -> None:
     assert t[-1] < 300.0
     end = [e for e in log.topics["/sim/status"].events if e.payload["event"] == "end"]
     assert end and end[0].payload["status"] == "diverged"
+
+
+def test_ctrl_c_ends_the_run_cleanly(tmp_path: Path, f16_text: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C (KeyboardInterrupt) in the middle of real JSBSim stepping: status interrupted, finished log."""
+    from fdi_sim.aircraft import Aircraft
+
+    real_step = Aircraft.step
+    calls = {"n": 0}
+
+    def step_then_interrupt(self: Aircraft) -> bool:
+        calls["n"] += 1
+        if calls["n"] == 600:  # 5 s into the run
+            raise KeyboardInterrupt
+        return real_step(self)
+
+    monkeypatch.setattr(Aircraft, "step", step_then_interrupt)
+    res = run(loads(f16_text), tmp_path, progress=False)
+    assert res.status == "interrupted"
+    log = read_log(res.log_path)  # a complete file (summary present), not one needing repair
+    assert log.topics["/truth/state"].t_s[-1] == pytest.approx(599 / 120)
+    assert [e.payload["status"] for e in log.topics["/sim/status"].events] == ["running", "interrupted"]
