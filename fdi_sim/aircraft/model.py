@@ -113,13 +113,14 @@ class Aircraft:
     def reader(self, names: Sequence[str]) -> Callable[[], NDArray[np.float64]]:
         """A fast closure returning the named signals as a new float64 array.
 
-        Signals whose property is ``a+b`` are summed (DHC-6 thrust of both engines).
+        Signals mapped to several properties are their sum (DHC-6 thrust of both engines).
         """
         getters: list[Callable[[], float]] = []
         for name in names:
             if name not in self._map:
                 raise KeyError(f"unknown signal {name!r} for {self.name}")
-            parts = [self.node(p).get_double_value for p in self._map[name].split("+")]
+            props = self._map[name]
+            parts = [self.node(p).get_double_value for p in ((props,) if isinstance(props, str) else props)]
             if len(parts) == 1:
                 getters.append(parts[0])
             else:

@@ -58,7 +58,7 @@ _COMMON: dict[str, str] = {
     "rudder_pos_rad": "fcs/rudder-pos-rad",
 }
 
-_PER_AIRCRAFT: dict[str, dict[str, str]] = {
+_PER_AIRCRAFT: dict[str, dict[str, str | tuple[str, ...]]] = {
     "f16": {
         "aileron_pos_rad": "fcs/aileron-pos-rad",
         "throttle_pos_norm": "fcs/throttle-pos-norm",
@@ -68,7 +68,7 @@ _PER_AIRCRAFT: dict[str, dict[str, str]] = {
     "DHC6": {
         "aileron_pos_rad": "fcs/left-aileron-pos-rad",
         "throttle_pos_norm": "fcs/throttle-pos-norm",
-        "thrust_lbf": "propulsion/engine[0]/thrust-lbs+propulsion/engine[1]/thrust-lbs",  # '+' sums
+        "thrust_lbf": ("propulsion/engine[0]/thrust-lbs", "propulsion/engine[1]/thrust-lbs"),  # both engines, summed
         "flaps_pos_rad": "fcs/flap-pos-rad",
     },
 }
@@ -89,8 +89,11 @@ SURFACE_SIGNALS: tuple[str, ...] = (
 )
 
 
-def property_map(aircraft: str) -> MappingProxyType[str, str]:
-    """Signal name -> JSBSim property for one aircraft (``"f16"`` or ``"DHC6"``-based)."""
+def property_map(aircraft: str) -> MappingProxyType[str, str | tuple[str, ...]]:
+    """Signal name -> JSBSim property for one aircraft (``"f16"`` or ``"DHC6"``-based).
+
+    A tuple of properties means the signal is their sum (thrust of several engines).
+    """
     base = "DHC6" if aircraft.startswith("DHC6") else aircraft
     if base not in _PER_AIRCRAFT:
         raise KeyError(aircraft)
