@@ -10,6 +10,8 @@ Table of contents
   or a :class:`RawTopic`; :func:`log_info` -> :class:`LogInfo` from the summary alone.
 - :func:`repair_log` -> :class:`RepairReport` (``repair.py``): rebuild a file cut off by a crash.
 - ``schemas.py``: topic names, schema validation, CDR layout, standard event JSON Schemas.
+- ``records.py``: MCAP framing, Message records and chunks laid out with numpy, chunk parsing
+  (shared by the writer, the reader and repair).
 
 MCAP libraries are imported only inside this package (STYLE.md rule 2).
 """

@@ -4,7 +4,7 @@ The ``mcap`` reader supplies the summary (schemas, channels, statistics, chunk i
 the metadata records; messages are decoded here in bulk. For each chunk the Message Index
 records give every message's offset in the decompressed chunk, so all rows of a vector channel
 are gathered with one numpy fancy index over a sliding-window view of the chunk and read as
-the packed record dtype of :func:`fdi_sim.flightlog.writer.message_dtype`: no Python loop per
+the packed record dtype of :func:`fdi_sim.flightlog.records.message_dtype`: no Python loop per
 message. Chunks without message indexes are scanned record by record instead.
 """
 from __future__ import annotations
@@ -12,31 +12,35 @@ from __future__ import annotations
 import io
 import json
 import struct
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Union
 
 import numpy as np
+from mcap.opcode import Opcode
 from numpy.typing import NDArray
 
 from fdi_sim.errors import LogError
+from fdi_sim.flightlog.records import (
+    FOOTER_RECORD_BYTES,
+    MCAP_MAGIC,
+    MESSAGE_HEAD,
+    has_footer,
+    message_dtype,
+    parse_chunk,
+    scan_records,
+)
 from fdi_sim.flightlog.schemas import (
     CDR_BE_HEADER,
     CDR_LE_HEADER,
-    MCAP_MAGIC,
     MESSAGE_ENCODING_CDR,
     MESSAGE_ENCODING_JSON,
     METADATA_SCENARIO,
     SCHEMA_ENCODING_ROS2MSG,
-    message_dtype,
     parse_ros2msg_float64,
 )
 from fdi_sim.units import NS_PER_S
 
-_OP_FOOTER, _OP_MESSAGE, _OP_CHUNK, _OP_MESSAGE_INDEX = 0x02, 0x05, 0x06, 0x07
-_FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4
-_MAX_CHUNK_BYTES = 1 << 30
 _READ_ERRORS = (struct.error, ValueError, KeyError, IndexError, UnicodeDecodeError, EOFError)
 
 
@@ -230,73 +234,11 @@ class LogInfo:
         return "\n".join(lines)
 
 
-# --- low-level helpers shared with repair ---------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class ChunkData:
-    """A decoded Chunk record (MCAP spec, "Chunk", op 0x06)."""
-
-    message_start_ns: int
-    message_end_ns: int
-    compression: str
-    records: bytes
-
-
-def parse_chunk(body: bytes | memoryview, check_crc: bool = True) -> ChunkData:
-    """Decode the body of a Chunk record and decompress its records.
-
-    Raises
-    ------
-    ValueError
-        Truncated body, unknown compression, wrong size or CRC mismatch.
-    """
-    start_ns, end_ns, usize, crc, clen = struct.unpack_from("<QQQII", body, 0)
-    pos = 32
-    compression = bytes(body[pos:pos + clen]).decode("utf-8")
-    pos += clen
-    (rlen,) = struct.unpack_from("<Q", body, pos)
-    pos += 8
-    packed = bytes(body[pos:pos + rlen])
-    if len(packed) != rlen or usize > _MAX_CHUNK_BYTES:
-        raise ValueError("chunk record is cut short or its sizes are implausible")
-    try:
-        if compression == "zstd":
-            import zstandard
-            records = zstandard.ZstdDecompressor().decompress(packed, max_output_size=usize)
-        elif compression == "lz4":
-            import lz4.frame
-            records = lz4.frame.decompress(packed)
-        elif compression == "":
-            records = packed
-        else:
-            raise ValueError(f"unsupported chunk compression {compression!r}")
-    except Exception as exc:  # zstandard.ZstdError, lz4's RuntimeError: damaged data
-        raise ValueError(f"chunk does not decompress ({exc})") from None
-    if len(records) != usize:
-        raise ValueError(f"chunk decompressed to {len(records)} bytes, expected {usize}")
-    if check_crc and crc != 0 and zlib.crc32(records) != crc:
-        raise ValueError("chunk CRC mismatch")
-    return ChunkData(start_ns, end_ns, compression, records)
-
-
-def scan_records(buf: bytes | memoryview, start: int = 0) -> Iterator[tuple[int, int, int]]:
-    """Yield ``(opcode, body_start, body_length)`` of each complete record from ``start``.
-
-    Stops silently at a record cut short (the caller compares the end position with the size).
-    """
-    n = len(buf)
-    pos = start
-    while pos + 9 <= n:
-        opcode, length = struct.unpack_from("<BQ", buf, pos)
-        if pos + 9 + length > n:
-            return
-        yield opcode, pos + 9, length
-        pos += 9 + length
-
-
+# --- low-level helpers -----------------------------------------------------------------------
 def _message_index(data: bytes, offset: int) -> tuple[int, NDArray[np.uint64], NDArray[np.uint64]]:
     """Parse a Message Index record at a file offset: channel id, log times, offsets."""
     opcode, length, cid, n_bytes = struct.unpack_from("<BQHI", data, offset)
-    if opcode != _OP_MESSAGE_INDEX or n_bytes % 16 or n_bytes + 6 > length:
+    if opcode != Opcode.MESSAGE_INDEX or n_bytes % 16 or n_bytes + 6 > length:
         raise ValueError(f"no message index record at byte {offset}")
     entries = np.frombuffer(data, dtype="<u8", count=n_bytes // 8, offset=offset + 15).reshape(-1, 2)
     return cid, entries[:, 0], entries[:, 1]
@@ -306,7 +248,7 @@ def _scan_chunk(records: bytes, start: int = 0) -> dict[int, tuple[NDArray[np.ui
     """Index the messages of a chunk (or of a whole unchunked file from ``start``) by scanning."""
     found: dict[int, tuple[list[int], list[int]]] = {}
     for opcode, body, _length in scan_records(records, start):
-        if opcode == _OP_MESSAGE:
+        if opcode == Opcode.MESSAGE:
             cid, _seq, log_ns = struct.unpack_from("<HIQ", records, body)
             logs, offs = found.setdefault(cid, ([], []))
             logs.append(log_ns)
@@ -319,9 +261,7 @@ def _check_framing(path: Path, data: bytes) -> None:
     if len(data) < len(MCAP_MAGIC) or data[:len(MCAP_MAGIC)] != MCAP_MAGIC:
         raise LogError(str(path), "not an MCAP file (it does not start with the MCAP magic bytes); "
                        "pass a flight log written by `fdi-sim run`")
-    tail = len(MCAP_MAGIC) + _FOOTER_RECORD_SIZE
-    if len(data) < len(MCAP_MAGIC) + tail or data[-len(MCAP_MAGIC):] != MCAP_MAGIC \
-            or data[-tail] != _OP_FOOTER:
+    if not has_footer(data):
         raise LogError(str(path), "the MCAP file is truncated: it has no footer (the run was cut off "
                        f"before the log was closed); rebuild it with `fdi-sim repair {path}`")
 
@@ -368,7 +308,7 @@ def read_log(path: str | Path) -> FlightLog:
                 per_channel[cid] = [(data, offs)]
         for ci in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             opcode, length = struct.unpack_from("<BQ", data, ci.chunk_start_offset)
-            if opcode != _OP_CHUNK:
+            if opcode != Opcode.CHUNK:
                 raise ValueError(f"no chunk record at byte {ci.chunk_start_offset}")
             body = memoryview(data)[ci.chunk_start_offset + 9:ci.chunk_start_offset + 9 + length]
             records = parse_chunk(body).records
@@ -416,10 +356,10 @@ def _decode_channel(cid: int, channel: Any, schema: Any, parts: list[tuple[bytes
     for records, offs in parts:
         for off in offs.tolist():
             opcode, length, got, _seq, log_ns = struct.unpack_from("<BQHIQ", records, off)
-            if opcode != _OP_MESSAGE or got != cid:
+            if opcode != Opcode.MESSAGE or got != cid:
                 raise ValueError(f"{channel.topic}: index points at a record that is not its message")
             logs.append(log_ns)
-            payloads.append(records[off + 31:off + 9 + length])
+            payloads.append(records[off + MESSAGE_HEAD.size:off + 9 + length])
     order = sorted(range(len(logs)), key=logs.__getitem__)
     if channel.message_encoding == MESSAGE_ENCODING_JSON:
         json_schema = json.loads(schema.data) if schema is not None and schema.data else {}
@@ -448,7 +388,7 @@ def _decode_vector(cid: int, topic: str, schema_name: str, fields: tuple[str, ..
     else:
         rec = np.zeros(0, dtype=dt)
     if len(rec):
-        if not (np.all(rec["opcode"] == _OP_MESSAGE) and np.all(rec["channel_id"] == cid)):
+        if not (np.all(rec["opcode"] == Opcode.MESSAGE) and np.all(rec["channel_id"] == cid)):
             raise ValueError(f"{topic}: index points at records that are not its messages")
         if not np.all(rec["length"] == size - 9):
             raise ValueError(f"{topic}: messages are not {len(fields)} packed float64 (size mismatch)")
@@ -461,7 +401,7 @@ def _decode_vector(cid: int, topic: str, schema_name: str, fields: tuple[str, ..
             values = values.byteswap()  # plain CDR big-endian: same layout, other byte order
         else:
             raise ValueError(f"{topic}: unsupported CDR encapsulation header {bytes(header[0])!r}")
-    log_ns = rec["log_time"].astype(np.uint64)
+    log_ns = rec["log_time_ns"].astype(np.uint64)
     if len(log_ns) > 1 and np.any(log_ns[1:] < log_ns[:-1]):
         order = np.argsort(log_ns, kind="stable")
         log_ns, values = log_ns[order], values[order]
@@ -482,7 +422,7 @@ def log_info(path: str | Path) -> LogInfo:
     p = Path(path)
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
-    n_tail = len(MCAP_MAGIC) + _FOOTER_RECORD_SIZE
+    n_tail = len(MCAP_MAGIC) + FOOTER_RECORD_BYTES
     try:
         size = p.stat().st_size
         with open(p, "rb") as f:

@@ -16,17 +16,24 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from mcap.opcode import Opcode
+
 from fdi_sim.errors import LogError
-from fdi_sim.flightlog.reader import parse_chunk, scan_records
-from fdi_sim.flightlog.schemas import MCAP_MAGIC, RawMessage, build_chunk
+from fdi_sim.flightlog.records import (
+    MCAP_MAGIC,
+    RawMessage,
+    build_chunk,
+    has_footer,
+    parse_chunk,
+    scan_records,
+)
+from fdi_sim.flightlog.schemas import SCHEMA_ENCODING_JSONSCHEMA, SCHEMA_ENCODING_ROS2MSG
 from fdi_sim.flightlog.writer import McapFileWriter
 from fdi_sim.units import NS_PER_S
 
-_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
-_OP_CHUNK, _OP_METADATA, _OP_DATA_END = 0x06, 0x0C, 0x0F
 #: records that only index or summarize: rebuilt, never copied
-_OP_DERIVED = frozenset({0x07, 0x08, 0x0A, 0x0B, 0x0D, 0x0E})
-_OP_ATTACHMENT = 0x09
+_OP_DERIVED = frozenset({Opcode.MESSAGE_INDEX, Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX,
+                         Opcode.STATISTICS, Opcode.METADATA_INDEX, Opcode.SUMMARY_OFFSET})
 #: messages per chunk when a file held messages outside chunks
 _LOOSE_CHUNK_MESSAGES = 4096
 
@@ -154,32 +161,32 @@ def _scan(data: bytes) -> _Recovered:
         body = view[start:start + length]
         rec.bytes_used = start + length
         try:
-            if opcode in (_OP_DATA_END, _OP_FOOTER):
-                rec.had_footer = _has_footer(data)
+            if opcode in (Opcode.DATA_END, Opcode.FOOTER):
+                rec.had_footer = has_footer(data)
                 break
-            if opcode == _OP_SCHEMA:
+            if opcode == Opcode.SCHEMA:
                 s = Schema.read(stream(body))
                 # schema records carry no CRC: a damaged text schema must not reach the repaired file
-                if s.encoding in ("ros2msg", "jsonschema"):
+                if s.encoding in (SCHEMA_ENCODING_ROS2MSG, SCHEMA_ENCODING_JSONSCHEMA):
                     text = bytes(s.data).decode("utf-8")
-                    if s.encoding == "jsonschema":
+                    if s.encoding == SCHEMA_ENCODING_JSONSCHEMA:
                         json.loads(text)
                 rec.schemas.setdefault(s.id, (s.name, s.encoding, bytes(s.data)))
-            elif opcode == _OP_CHANNEL:
+            elif opcode == Opcode.CHANNEL:
                 c = Channel.read(stream(body))
                 rec.channels.setdefault(c.id, (c.schema_id, c.topic, c.message_encoding, dict(c.metadata)))
-            elif opcode == _OP_METADATA:
+            elif opcode == Opcode.METADATA:
                 m = Metadata.read(stream(body))
                 rec.metadata.append((m.name, dict(m.metadata)))
-            elif opcode == _OP_MESSAGE:
+            elif opcode == Opcode.MESSAGE:
                 msg = Message.read(stream(body), length)
                 loose.append(RawMessage(msg.channel_id, msg.sequence, msg.log_time, bytes(msg.data)))
-            elif opcode == _OP_CHUNK:
+            elif opcode == Opcode.CHUNK:
                 try:
                     rec.chunks.append(_chunk_messages(parse_chunk(body).records, rec, stream))
                 except (ValueError, struct.error, McapError, UnicodeDecodeError):
                     rec.chunks_dropped += 1
-            elif opcode == _OP_HEADER or opcode in _OP_DERIVED:
+            elif opcode == Opcode.HEADER or opcode in _OP_DERIVED:
                 pass
             else:  # attachments and unknown records are not carried over
                 rec.skipped += 1
@@ -199,25 +206,20 @@ def _chunk_messages(records: bytes, rec: _Recovered, stream: object) -> list[Raw
     view = memoryview(records)
     for opcode, start, length in scan_records(view):
         end = start + length
-        if opcode == _OP_MESSAGE:
-            if length < 22:
+        if opcode == Opcode.MESSAGE:
+            if length < 22:  # channel u16, sequence u32, log and publish time u64
                 raise ValueError("message record too short")
             cid, seq, log_ns = struct.unpack_from("<HIQ", records, start)
             out.append(RawMessage(cid, seq, log_ns, records[start + 22:end]))
-        elif opcode == _OP_SCHEMA:
+        elif opcode == Opcode.SCHEMA:
             s = Schema.read(stream(view[start:end]))  # type: ignore[operator]
             rec.schemas.setdefault(s.id, (s.name, s.encoding, bytes(s.data)))
-        elif opcode == _OP_CHANNEL:
+        elif opcode == Opcode.CHANNEL:
             c = Channel.read(stream(view[start:end]))  # type: ignore[operator]
             rec.channels.setdefault(c.id, (c.schema_id, c.topic, c.message_encoding, dict(c.metadata)))
     if end != len(records):
         raise ValueError("chunk records do not fill the chunk")
     return out
-
-
-def _has_footer(data: bytes) -> bool:
-    tail = len(MCAP_MAGIC) + 29
-    return len(data) >= tail + len(MCAP_MAGIC) and data.endswith(MCAP_MAGIC) and data[-tail] == _OP_FOOTER
 
 
 def _write(src: Path, dst: Path, data: bytes, rec: _Recovered, compression: str | None) -> RepairReport:

@@ -1,4 +1,4 @@
-"""Message schemas, topic names and wire layout of the fdi-sim flight log.
+"""Message schemas, topic names and CDR payloads of the fdi-sim flight log.
 
 Two kinds of channel (DESIGN.md, "User-facing contracts"):
 
@@ -16,12 +16,10 @@ XCDR1 aligns a ``float64`` to 8 bytes *relative to the end of the header* (the a
 origin is byte 4), so a struct of ``float64`` only has no padding at all:
 ``len = 4 + 8 * n_fields``. Every vector message is therefore
 ``b"\\x00\\x01\\x00\\x00" + values.astype("<f8").tobytes()`` and numpy can build a whole
-second of rows in one shot: the last section lays out complete MCAP Message records and
-chunks that way (:func:`build_chunk`), for the writer, the reader and repair alike.
+second of rows in one shot (:func:`fdi_sim.flightlog.records.build_chunk`).
 """
 from __future__ import annotations
 
-import functools
 import json
 import math
 import re
@@ -29,11 +27,7 @@ import struct
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
-import numpy as np
-from numpy.typing import NDArray
-
 from fdi_sim.errors import LogError
-from fdi_sim.units import NS_PER_S
 
 # --- encodings ------------------------------------------------------------------------------
 #: CDR encapsulation header: representation id CDR_LE (0x0001, big-endian) + options 0x0000
@@ -282,306 +276,37 @@ def _json_default(obj: Any) -> Any:
 
 
 # --- JSON Schemas of the standard event channels ----------------------------------------------
+def _object_schema(title: str, required: list[str], **properties: dict[str, Any]) -> dict[str, Any]:
+    """A JSON Schema of an object with the given properties."""
+    return {"type": "object", "title": title, "properties": properties, "required": required}
+
+
+_DETECTOR_ID = {"type": "string", "description": "registry id of the detector"}
+
 #: ``/fdi/alarms``: one message each time a detector's alarm changes state
-ALARM_JSON_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "title": "fdi-sim alarm transition",
-    "properties": {
-        "detector": {"type": "string", "description": "registry id of the detector"},
-        "alarm": {"type": "boolean", "description": "new alarm state"},
-        "statistic": {"type": "number", "description": "test statistic at the transition"},
-        "threshold": {"type": "number", "description": "alarm threshold"},
-        "isolation": {"type": ["string", "null"], "description": "isolated hypothesis, if any"},
-    },
-    "required": ["detector", "alarm"],
-}
+ALARM_JSON_SCHEMA: dict[str, Any] = _object_schema(
+    "fdi-sim alarm transition", ["detector", "alarm"],
+    detector=_DETECTOR_ID,
+    alarm={"type": "boolean", "description": "new alarm state"},
+    statistic={"type": "number", "description": "test statistic at the transition"},
+    threshold={"type": "number", "description": "alarm threshold"},
+    isolation={"type": ["string", "null"], "description": "isolated hypothesis, if any"},
+)
 
 #: ``/fdi/failure_log``: time of occurrence, duration and nature of each failure
 #: (Miller & Ribbens 2003, the failure log of FIG. 4)
-FAILURE_LOG_JSON_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "title": "fdi-sim failure-log entry",
-    "properties": {
-        "hypothesis": {"type": "string", "description": "failed component (signal name)"},
-        "detector": {"type": "string", "description": "registry id of the detector"},
-        "onset_t_s": {"type": "number", "description": "time of occurrence [s]"},
-        "duration_s": {"type": ["number", "null"], "description": "duration [s], null while active"},
-        "kind": {"type": "string", "description": "nature of the failure"},
-    },
-    "required": ["hypothesis", "onset_t_s"],
-}
+FAILURE_LOG_JSON_SCHEMA: dict[str, Any] = _object_schema(
+    "fdi-sim failure-log entry", ["hypothesis", "onset_t_s"],
+    hypothesis={"type": "string", "description": "failed component (signal name)"},
+    detector=_DETECTOR_ID,
+    onset_t_s={"type": "number", "description": "time of occurrence [s]"},
+    duration_s={"type": ["number", "null"], "description": "duration [s], null while active"},
+    kind={"type": "string", "description": "nature of the failure"},
+)
 
 #: ``/sim/status``: run status (start, trim done, end, diverged)
-STATUS_JSON_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "title": "fdi-sim run status",
-    "properties": {
-        "status": {"type": "string"},
-        "message": {"type": "string"},
-    },
-    "required": ["status"],
-}
-
-
-# --- wire layout: MCAP Message records and chunks (used by writer, reader and repair) -------
-# A Message record (MCAP spec, "Message", op 0x05) is opcode u8 | record length u64 |
-# channel_id u16 | sequence u32 | log_time u64 | publish_time u64 | data. For a vector
-# channel the data is the CDR payload above, so every record of the channel has the same size
-# 35 + 8 * n_fields and a whole chunk of them is one packed numpy structured array.
-MCAP_MAGIC: bytes = b"\x89MCAP0\r\n"
-OP_MESSAGE: int = 0x05
-OP_MESSAGE_INDEX: int = 0x07
-#: bytes of a Message record before its data: opcode, length, channel, sequence, 2 times
-MESSAGE_HEAD = struct.Struct("<BQHIQQ")
-
-
-def message_dtype(n_fields: int) -> np.dtype:
-    """Packed dtype of one complete Message record of a vector channel of ``n_fields``."""
-    return np.dtype([
-        ("opcode", "u1"), ("length", "<u8"), ("channel_id", "<u2"), ("sequence", "<u4"),
-        ("log_time", "<u8"), ("publish_time", "<u8"), ("cdr", "u1", (4,)),
-        ("values", "<f8", (n_fields,)),
-    ])
-
-
-@dataclass(frozen=True, eq=False)
-class VectorBlock:
-    """Rows of one vector channel for one chunk.
-
-    Attributes
-    ----------
-    channel_id : int
-    first_sequence : int
-        Sequence number of the first row (the channel's message counter).
-    t_s : NDArray
-        Times [s], shape (n,); blocks of one step share the same array object.
-    values : NDArray
-        Values without ``t_s``, shape (n, n_fields - 1).
-    """
-
-    channel_id: int
-    first_sequence: int
-    t_s: NDArray[np.float64]
-    values: NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class RawMessage:
-    """One already-encoded message (events, messages recovered by repair); log = publish time [ns]."""
-
-    channel_id: int
-    sequence: int
-    log_time_ns: int
-    data: bytes
-
-
-@dataclass(frozen=True, eq=False)
-class ChunkPayload:
-    """The uncompressed records of one chunk and what its indexes need.
-
-    Attributes
-    ----------
-    records : bytes-like
-        Concatenated Message records in log-time order.
-    message_start_ns, message_end_ns : int
-        Earliest and latest log time [ns].
-    message_count : int
-    index : dict
-        channel id -> Message Index entries, shape (n, 2): (log time [ns], offset into
-        ``records``) per message, sorted by log time.
-    """
-
-    records: bytes | bytearray
-    message_start_ns: int
-    message_end_ns: int
-    message_count: int
-    index: dict[int, NDArray[np.uint64]]
-
-
-def log_time_ns(t_s: NDArray[np.float64]) -> NDArray[np.uint64]:
-    """log_time = round(t_s * 1e9) [ns], round half to even like Python's ``round``."""
-    return np.rint(np.asarray(t_s, dtype=np.float64) * NS_PER_S).astype(np.uint64)
-
-
-def vector_records(block: VectorBlock) -> NDArray[Any]:
-    """Complete Message records of one :class:`VectorBlock` as a packed structured array."""
-    n, n_values = block.values.shape
-    rec = np.empty(n, dtype=message_dtype(n_values + 1))
-    rec["opcode"] = OP_MESSAGE
-    rec["length"] = rec.dtype.itemsize - 9
-    rec["channel_id"] = block.channel_id
-    rec["sequence"] = (np.arange(n, dtype=np.int64) + block.first_sequence) & 0xFFFFFFFF
-    log = log_time_ns(block.t_s)
-    rec["log_time"] = log
-    rec["publish_time"] = log
-    rec["cdr"] = np.frombuffer(CDR_LE_HEADER, dtype=np.uint8)
-    rec["values"][:, 0] = block.t_s
-    rec["values"][:, 1:] = block.values
-    return rec
-
-
-#: per-row fields shared by every channel of a step: sequence, log time, publish time, CDR
-#: header, t_s (bytes 11..43 of each Message record)
-_ROW_HEAD = np.dtype([("sequence", "<u4"), ("log_time", "<u8"), ("publish_time", "<u8"),
-                      ("cdr", "V4"), ("t_s", "<f8")])
-
-
-@functools.lru_cache(maxsize=64)
-def _step_layout(ids: tuple[int, ...], n_values: tuple[int, ...]) -> tuple[np.dtype, bytes, NDArray[np.int64]]:
-    """One time step holding one Message record per channel, back to back: its dtype (the
-    variable parts only), its bytes with the constant parts filled, each record's offset."""
-    names: list[str] = []
-    formats: list[Any] = []
-    offsets: list[int] = []
-    template = b""
-    starts = []
-    for c, (cid, nv) in enumerate(zip(ids, n_values)):
-        base = len(template)
-        starts.append(base)
-        names += [f"h{c}", f"v{c}"]
-        formats += [_ROW_HEAD, ("<f8", (nv,))]
-        offsets += [base + 11, base + 43]
-        template += struct.pack("<BQH", OP_MESSAGE, 34 + 8 * nv, cid) + bytes(32 + 8 * nv)
-    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": len(template)})
-    return dtype, template, np.array(starts, dtype=np.int64)
-
-
-def _row_heads(t_s: NDArray[np.float64], log: NDArray[np.uint64], first_sequence: int) -> NDArray[Any]:
-    head = np.empty(len(t_s), dtype=_ROW_HEAD)
-    head["sequence"] = (np.arange(len(t_s), dtype=np.int64) + first_sequence) & 0xFFFFFFFF
-    head["log_time"] = log
-    head["publish_time"] = log
-    head["cdr"] = np.void(CDR_LE_HEADER)
-    head["t_s"] = t_s
-    return head
-
-
-def _regular_layout(blocks: list[VectorBlock]) -> tuple[bytearray, NDArray[np.uint64], NDArray[np.int64]] | None:
-    """The usual chunk: every channel wrote once per step at the same, sorted times. A step
-    is then a fixed-size group of records and the chunk one structured array, filled with
-    two copies per channel. Returns the bytes, the log times (n,) and the record offsets
-    (n, channels); None if the chunk is not regular."""
-    t0 = blocks[0].t_s
-    n = len(t0)
-    if not all(b.t_s is t0 or (len(b.t_s) == n and np.array_equal(b.t_s, t0)) for b in blocks):
-        return None
-    log = log_time_ns(t0)
-    if np.any(log[1:] < log[:-1]):
-        return None
-    dtype, template, starts = _step_layout(tuple(b.channel_id for b in blocks),
-                                           tuple(b.values.shape[1] for b in blocks))
-    buf = bytearray(template * n)
-    comb = np.frombuffer(buf, dtype=dtype)
-    heads: dict[int, NDArray[Any]] = {}
-    for c, b in enumerate(blocks):
-        if b.first_sequence not in heads:
-            heads[b.first_sequence] = _row_heads(t0, log, b.first_sequence)
-        comb[f"h{c}"] = heads[b.first_sequence]
-        comb[f"v{c}"] = b.values
-    offsets = np.arange(n, dtype=np.int64)[:, None] * len(template) + starts[None, :]
-    return buf, log, offsets
-
-
-def _general_layout(blocks: list[VectorBlock]) -> tuple[bytes, NDArray[np.uint64], NDArray[np.int64], list[NDArray[np.int64]]]:
-    """Any chunk: stable sort of all rows by (log time, block), whole records copied into
-    place. Returns the bytes, file-order log times and offsets, and each block's positions."""
-    recs = [vector_records(b) for b in blocks]
-    all_log = np.concatenate([r["log_time"] for r in recs])
-    blk = np.concatenate([np.full(len(r), c, dtype=np.int64) for c, r in enumerate(recs)])
-    order = np.lexsort((blk, all_log))
-    sizes = np.array([r.dtype.itemsize for r in recs], dtype=np.int64)
-    size_sorted = sizes[blk[order]]
-    voff = np.concatenate(([0], np.cumsum(size_sorted)[:-1])).astype(np.int64)
-    inv = np.empty_like(order)
-    inv[order] = np.arange(len(order))
-    out = np.empty(int(size_sorted.sum()), dtype=np.uint8)
-    positions, start = [], 0
-    for c, r in enumerate(recs):
-        pos = inv[start:start + len(r)]
-        start += len(r)
-        s = int(sizes[c])
-        # writable overlapping window view: row i is out[i : i + s]; the targets don't overlap
-        win = np.lib.stride_tricks.as_strided(out, shape=(len(out) - s + 1, s), strides=(1, 1))
-        win[voff[pos]] = r.view(np.uint8).reshape(len(r), s)
-        positions.append(pos)
-    return out.tobytes(), all_log[order], voff, positions
-
-
-def _entries(log: NDArray[Any], offsets: NDArray[Any]) -> NDArray[np.uint64]:
-    e = np.empty((len(log), 2), dtype="<u8")
-    e[:, 0] = log
-    e[:, 1] = offsets
-    return e
-
-
-def build_chunk(blocks: Sequence[VectorBlock], raws: Sequence[RawMessage] = ()) -> ChunkPayload:
-    """Lay out the Message records of one chunk in log-time order and index them.
-
-    Parameters
-    ----------
-    blocks : sequence of VectorBlock
-        At most one per channel. Rows are interleaved by time (ties: block order).
-    raws : sequence of RawMessage
-        Already-encoded messages (any order); spliced in after vector messages of equal time.
-    """
-    blocks = [b for b in blocks if len(b.t_s)]
-    regular = _regular_layout(blocks) if blocks else None
-    if regular is not None and not raws:  # the per-second fast path
-        buf, log, offs = regular
-        index = {b.channel_id: _entries(log, offs[:, c]) for c, b in enumerate(blocks)}
-        return ChunkPayload(buf, int(log[0]), int(log[-1]), len(log) * len(blocks), index)
-    if regular is not None:
-        vbytes: bytes | bytearray = regular[0]
-        k = len(blocks)
-        vlog, voff = np.repeat(regular[1], k), regular[2].ravel()
-        positions = [np.arange(len(regular[1]), dtype=np.int64) * k + c for c in range(k)]
-    elif blocks:
-        vbytes, vlog, voff, positions = _general_layout(blocks)
-    else:
-        vbytes, vlog, voff, positions = b"", np.zeros(0, np.uint64), np.zeros(0, np.int64), []
-    n_vec = len(vlog)
-    order = sorted(range(len(raws)), key=lambda i: raws[i].log_time_ns)
-    rlog = np.array([raws[i].log_time_ns for i in order], dtype=np.uint64)
-    rbytes = [MESSAGE_HEAD.pack(OP_MESSAGE, 22 + len(raws[i].data), raws[i].channel_id,
-                                raws[i].sequence & 0xFFFFFFFF, raws[i].log_time_ns,
-                                raws[i].log_time_ns) + raws[i].data for i in order]
-    rsize = np.array([len(b) for b in rbytes], dtype=np.int64)
-    ins = np.searchsorted(vlog, rlog, side="right")
-    voff_ext = np.append(voff, len(vbytes)).astype(np.int64)
-    view = memoryview(vbytes)
-    pieces: list[Any] = []
-    prev = 0
-    for j, i in enumerate(ins.tolist()):
-        pieces += [view[voff_ext[prev]:voff_ext[i]], rbytes[j]]
-        prev = i
-    pieces.append(view[voff_ext[prev]:])
-    records = b"".join(pieces)
-    # vector message k moves by the sizes of the raw messages inserted before it
-    inc = np.zeros(n_vec + 1, dtype=np.int64)
-    np.add.at(inc, ins, rsize)
-    voff = voff + np.cumsum(inc)[:n_vec]
-    roff = voff_ext[ins] + np.concatenate(([0], np.cumsum(rsize)[:-1])).astype(np.int64)
-    parts: dict[int, list[tuple[NDArray[Any], NDArray[Any]]]] = {}
-    for b, pos in zip(blocks, positions):
-        parts.setdefault(b.channel_id, []).append((vlog[pos], voff[pos]))
-    rch = np.array([raws[i].channel_id for i in order], dtype=np.int64)
-    for cid in np.unique(rch).tolist():
-        sel = rch == cid
-        parts.setdefault(int(cid), []).append((rlog[sel], roff[sel]))
-    index = {}
-    for cid in sorted(parts):
-        log = np.concatenate([p[0] for p in parts[cid]])
-        off = np.concatenate([p[1] for p in parts[cid]])
-        o = np.lexsort((off, log))  # a channel written out of time order gets sorted entries
-        index[cid] = _entries(log[o], off[o])
-    all_log = np.concatenate([vlog, rlog])
-    if len(all_log) == 0:
-        return ChunkPayload(b"", 0, 0, 0, {})
-    return ChunkPayload(records, int(all_log.min()), int(all_log.max()), len(all_log), index)
-
-
-def encode_message_index(channel_id: int, entries: NDArray[np.uint64]) -> bytes:
-    """One Message Index record (op 0x07): channel_id u16, entries' byte length u32, then
-    (log_time u64, offset u64) per message, offsets from the start of the chunk's records."""
-    body = np.ascontiguousarray(entries, dtype="<u8").tobytes()
-    return struct.pack("<BQHI", OP_MESSAGE_INDEX, 2 + 4 + len(body), channel_id, len(body)) + body
+STATUS_JSON_SCHEMA: dict[str, Any] = _object_schema(
+    "fdi-sim run status", ["status"],
+    status={"type": "string"},
+    message={"type": "string"},
+)

@@ -1,10 +1,10 @@
 """Write the flight log: one MCAP file per run, flushed about once per simulated second.
 
 Design (measured with ``tests/benchmarks/bench_flightlog.py``): the simulation loop calls
-:meth:`VectorChannel.write` ~6 times per 1/120 s step, so a write only checks the time and
+:meth:`VectorChannel.write` ~5 times per 1/120 s step, so a write only checks the time and
 appends the row's bytes to a list. Once per ``flush_period_s`` of *simulated* time the rows
 of all channels become one MCAP chunk built by numpy in one shot
-(:func:`fdi_sim.flightlog.schemas.build_chunk`: complete Message records interleaved in time
+(:func:`fdi_sim.flightlog.records.build_chunk`: complete Message records interleaved in time
 order), compressed, followed by one Message Index record per channel, then ``file.flush()``.
 A process killed with SIGKILL therefore loses at most one flush period, and
 :func:`fdi_sim.flightlog.repair_log` rebuilds the summary of such a file. ``close()`` writes
@@ -16,30 +16,32 @@ from __future__ import annotations
 import math
 import numbers
 import struct
-import sys
 import zlib
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+from mcap.opcode import Opcode
 from numpy.typing import NDArray
 
 from fdi_sim import __version__ as _FDI_SIM_VERSION
 from fdi_sim.errors import LogError
-from fdi_sim.flightlog.schemas import (
+from fdi_sim.flightlog.records import (
     MCAP_MAGIC,
+    ChunkPayload,
+    RawMessage,
+    VectorBlock,
+    build_chunk,
+    encode_message_index,
+)
+from fdi_sim.flightlog.schemas import (
     MESSAGE_ENCODING_CDR,
     MESSAGE_ENCODING_JSON,
     SCHEMA_ENCODING_JSONSCHEMA,
     SCHEMA_ENCODING_ROS2MSG,
-    ChunkPayload,
     EventSchema,
-    RawMessage,
-    VectorBlock,
     VectorSchema,
-    build_chunk,
     check_topic,
-    encode_message_index,
     event_schema,
     vector_schema,
 )
@@ -52,13 +54,9 @@ ZSTD_LEVEL: int = 1
 #: log_time is uint64 ns; keep t_s far below its range (and below 2**53 ns for exact floats)
 MAX_T_S: float = 1.0e7
 
-# MCAP opcodes (MCAP spec, "Records")
-_OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL = 0x01, 0x02, 0x03, 0x04
-_OP_CHUNK, _OP_CHUNK_INDEX, _OP_STATISTICS = 0x06, 0x08, 0x0B
-_OP_METADATA, _OP_METADATA_INDEX, _OP_SUMMARY_OFFSET, _OP_DATA_END = 0x0C, 0x0D, 0x0E, 0x0F
-_LITTLE = sys.byteorder == "little"
-_F8 = np.dtype(np.float64)
-_NDARRAY = np.ndarray
+#: the dtype of a fresh float64 array on a little-endian machine (the only one written as is)
+_F8_LE = np.dtype("<f8")
+_NDARRAY = np.ndarray  # one global lookup instead of two on the write path
 
 
 def _string(s: str) -> bytes:
@@ -121,7 +119,7 @@ class McapFileWriter:
         self._open = True
         try:
             self._write(MCAP_MAGIC)
-            self._write(_record(_OP_HEADER, _string("") + _string(LIBRARY)))
+            self._write(_record(Opcode.HEADER, _string("") + _string(LIBRARY)))
         except OSError as exc:
             self.abort()
             raise LogError(str(path), f"cannot write the flight log ({exc})") from None
@@ -134,7 +132,7 @@ class McapFileWriter:
 
     def add_schema(self, schema_id: int, name: str, encoding: str, data: bytes) -> None:
         """Write a Schema record (op 0x03)."""
-        rec = _record(_OP_SCHEMA, struct.pack("<H", schema_id) + _string(name) + _string(encoding)
+        rec = _record(Opcode.SCHEMA, struct.pack("<H", schema_id) + _string(name) + _string(encoding)
                       + struct.pack("<I", len(data)) + data)
         self._schemas[schema_id] = rec
         self._write(rec)
@@ -142,7 +140,7 @@ class McapFileWriter:
     def add_channel(self, channel_id: int, schema_id: int, topic: str, message_encoding: str,
                     metadata: Mapping[str, str] | None = None) -> None:
         """Write a Channel record (op 0x04)."""
-        rec = _record(_OP_CHANNEL, struct.pack("<HH", channel_id, schema_id) + _string(topic)
+        rec = _record(Opcode.CHANNEL, struct.pack("<HH", channel_id, schema_id) + _string(topic)
                       + _string(message_encoding) + _string_map(metadata or {}))
         self._channels[channel_id] = rec
         self._counts.setdefault(channel_id, 0)
@@ -150,9 +148,9 @@ class McapFileWriter:
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """Write a Metadata record (op 0x0C) and remember its index."""
-        rec = _record(_OP_METADATA, _string(name) + _string_map(data))
+        rec = _record(Opcode.METADATA, _string(name) + _string_map(data))
         self._metadata_indexes.append(_record(
-            _OP_METADATA_INDEX, struct.pack("<QQ", self._pos, len(rec)) + _string(name)))
+            Opcode.METADATA_INDEX, struct.pack("<QQ", self._pos, len(rec)) + _string(name)))
         self._write(rec)
 
     def write_chunk(self, payload: ChunkPayload) -> None:
@@ -165,7 +163,7 @@ class McapFileWriter:
         head = struct.pack("<QQQI", payload.message_start_ns, payload.message_end_ns, len(raw),
                            zlib.crc32(raw)) + struct.pack("<I", len(cname)) + cname + struct.pack("<Q", len(packed))
         chunk_start = self._pos
-        self._write(struct.pack("<BQ", _OP_CHUNK, len(head) + len(packed)) + head)
+        self._write(struct.pack("<BQ", Opcode.CHUNK, len(head) + len(packed)) + head)
         self._write(packed)
         chunk_length = self._pos - chunk_start
         index_start = self._pos
@@ -174,7 +172,7 @@ class McapFileWriter:
             offsets += struct.pack("<HQ", cid, self._pos)
             self._write(encode_message_index(cid, entries))
             self._counts[cid] = self._counts.get(cid, 0) + len(entries)
-        self._chunk_indexes.append(_record(_OP_CHUNK_INDEX, struct.pack(
+        self._chunk_indexes.append(_record(Opcode.CHUNK_INDEX, struct.pack(
             "<QQQQI", payload.message_start_ns, payload.message_end_ns, chunk_start, chunk_length,
             len(offsets)) + offsets + struct.pack("<Q", self._pos - index_start) + _string(self._compression)
             + struct.pack("<QQ", len(packed), len(raw))))
@@ -193,27 +191,27 @@ class McapFileWriter:
         if not self._open:
             return
         try:
-            self._write(_record(_OP_DATA_END, struct.pack("<I", self._crc)))
+            self._write(_record(Opcode.DATA_END, struct.pack("<I", self._crc)))
             summary_start = self._pos
             groups: list[tuple[int, bytes]] = [
-                (_OP_SCHEMA, b"".join(self._schemas[k] for k in sorted(self._schemas))),
-                (_OP_CHANNEL, b"".join(self._channels[k] for k in sorted(self._channels))),
-                (_OP_STATISTICS, self._statistics()),
-                (_OP_CHUNK_INDEX, b"".join(self._chunk_indexes)),
-                (_OP_METADATA_INDEX, b"".join(self._metadata_indexes)),
+                (Opcode.SCHEMA, b"".join(self._schemas[k] for k in sorted(self._schemas))),
+                (Opcode.CHANNEL, b"".join(self._channels[k] for k in sorted(self._channels))),
+                (Opcode.STATISTICS, self._statistics()),
+                (Opcode.CHUNK_INDEX, b"".join(self._chunk_indexes)),
+                (Opcode.METADATA_INDEX, b"".join(self._metadata_indexes)),
             ]
             summary = b""
             offsets = b""
             for opcode, data in groups:
                 if data:
-                    offsets += _record(_OP_SUMMARY_OFFSET, struct.pack(
+                    offsets += _record(Opcode.SUMMARY_OFFSET, struct.pack(
                         "<BQQ", opcode, summary_start + len(summary), len(data)))
                     summary += data
             offset_start = summary_start + len(summary)
             summary += offsets
             # Footer: summary_start, summary_offset_start, summary_crc; the CRC covers the
             # summary section and the footer fields before it (MCAP spec, "Footer")
-            footer_head = struct.pack("<BQQQ", _OP_FOOTER, 20, summary_start, offset_start)
+            footer_head = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start)
             crc = zlib.crc32(footer_head, zlib.crc32(summary))
             self._f.write(summary + footer_head + struct.pack("<I", crc) + MCAP_MAGIC)
             self._f.flush()
@@ -224,7 +222,7 @@ class McapFileWriter:
     def _statistics(self) -> bytes:
         # channels with messages only, as the reference writers do
         counts = b"".join(struct.pack("<HQ", k, n) for k, n in sorted(self._counts.items()) if n)
-        return _record(_OP_STATISTICS, struct.pack(
+        return _record(Opcode.STATISTICS, struct.pack(
             "<QHIIIIQQI", self._n_messages, len(self._schemas), len(self._channels), 0,
             len(self._metadata_indexes), len(self._chunk_indexes), self._start_ns or 0, self._end_ns,
             len(counts)) + counts)
@@ -270,15 +268,22 @@ class VectorChannel:
         values : 1-D float array or sequence
             ``len(fields) - 1`` values in field order, without ``t_s``. Copied.
         """
-        w = self._w
+        # the common cases inline (a time in the current flush window; a fresh float64 array
+        # or a tuple of floats); everything else, and every error, through the general checks
         try:
-            in_window = 0.0 <= t_s < w._hi_t_s
+            in_window = 0.0 <= t_s < self._w._hi_t_s
         except TypeError:
             in_window = False
         if not in_window:
-            w._time_slow_path(t_s, self.topic)
-        if type(values) is _NDARRAY and values.dtype is _F8 and values.shape == self._shape and _LITTLE:
+            self._w._admit_time(t_s, self.topic)
+        kind = type(values)
+        if kind is _NDARRAY and values.dtype is _F8_LE and values.shape == self._shape:
             b = values.tobytes()
+        elif kind is tuple:
+            try:
+                b = self._pack(*values)
+            except (struct.error, TypeError):
+                b = self._values_slow_path(values)
         else:
             b = self._values_slow_path(values)
         self._t.append(t_s)
@@ -300,17 +305,11 @@ class VectorChannel:
                            f"float values for {self.schema.fields[1:]} (without t_s), got {got}")
         return arr.astype("<f8").tobytes()
 
-    def _take(self, shared: tuple[list[float], NDArray[np.float64]] | None) -> VectorBlock | None:
-        """Hand the buffered rows over as a block; reuse ``shared`` times if they are equal."""
+    def _take(self, t_s: NDArray[np.float64]) -> VectorBlock:
+        """Hand the buffered rows over as a block; ``t_s`` is ``self._t`` as an array [s]."""
         n = len(self._t)
-        if n == 0:
-            return None
         values = np.frombuffer(b"".join(self._b), dtype="<f8").reshape(n, self.schema.n_values)
-        if shared is not None and self._t == shared[0]:
-            t = shared[1]
-        else:
-            t = np.array(self._t, dtype=np.float64)
-        block = VectorBlock(self.channel_id, self._seq, t, values)
+        block = VectorBlock(self.channel_id, self._seq, t_s, values)
         self._seq += n
         self._t = []
         self._b = []
@@ -332,12 +331,7 @@ class EventChannel:
     def write(self, t_s: float, payload: Mapping[str, Any]) -> None:
         """Log one event at simulated time ``t_s`` [s]; ``payload`` is a JSON-able dict."""
         w = self._w
-        try:
-            in_window = 0.0 <= t_s < w._hi_t_s
-        except TypeError:
-            in_window = False
-        if not in_window:
-            w._time_slow_path(t_s, self.topic)
+        w._admit_time(t_s, self.topic)  # events are rare: always the full check
         try:
             data = self.schema.encode(payload)
         except LogError as exc:
@@ -530,8 +524,11 @@ class FlightLogWriter:
             raise LogError(str(self.path), f"write failed ({exc}); the file was left without "
                            "its summary: run `fdi-sim repair` on it") from None
 
-    def _time_slow_path(self, t_s: Any, topic: str) -> None:
-        """A write whose time is outside the current flush window: flush, or raise."""
+    def _admit_time(self, t_s: Any, topic: str) -> None:
+        """Check the time of a write; flush first if it leaves the current flush window.
+
+        :meth:`VectorChannel.write` calls this only for times outside the window.
+        """
         self._check_open()
         if not isinstance(t_s, numbers.Real):
             raise LogError(str(self.path), f"{topic}: t_s = {t_s!r} is not a number")
@@ -550,13 +547,15 @@ class FlightLogWriter:
     def _write_pending(self) -> float | None:
         """Write the buffered messages as one chunk, flush; return their latest time [s]."""
         blocks: list[VectorBlock] = []
-        shared = None
+        # channels written at every step hold equal times: convert them once and share the
+        # array, which also lets build_chunk recognise the regular layout by identity
+        times: list[float] | None = None
+        t_s = np.zeros(0)
         for ch in self._vector:
-            times = ch._t
-            block = ch._take(shared)
-            if block is not None:
-                blocks.append(block)
-                shared = (times, block.t_s)
+            if ch._t:
+                if ch._t != times:
+                    times, t_s = ch._t, np.array(ch._t, dtype=np.float64)
+                blocks.append(ch._take(t_s))
         raws, self._pending_raw = self._pending_raw, []
         t_max = None
         if blocks or raws:

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from fdi_sim.flightlog import FlightLogWriter, read_log, repair_log
+from fdi_sim.flightlog.records import VectorBlock, build_chunk
 from fdi_sim.flightlog.schemas import CDR_LE_HEADER
 
 WIDTHS = (29, 6, 6, 8, 12, 8)
@@ -63,35 +64,42 @@ def bench_primitives() -> None:
         print(f"  {stmt:28s} {best * 1e9:7.0f}")
 
 
-def _encoder():
-    d = struct.Struct("<d").pack
+def _loop(t: np.ndarray, rows: list, writes: list, flush=None) -> None:
+    """The sim loop's logging: per step one ``write(t_s, row)`` per channel, and ``flush()``
+    when a step reaches a whole simulated second (the FlightLogWriter flushes itself)."""
+    next_flush = 1.0
+    for k in range(len(t)):
+        tk = float(t[k])
+        if flush is not None and tk >= next_flush:
+            flush()
+            next_flush += 1.0
+        for write, r in zip(writes, rows):
+            write(tk, r[k])
 
-    def encode(t: float, v: np.ndarray) -> bytes:
-        return CDR_LE_HEADER + d(t) + v.tobytes()
-    return encode
+
+def _ros2msg(width: int) -> bytes:
+    return "".join(f"float64 f{j}\n" for j in range(width + 1)).encode()
+
+
+def _cdr(t_s: float, v: np.ndarray, _d=struct.Struct("<d").pack) -> bytes:
+    return CDR_LE_HEADER + _d(t_s) + v.tobytes()
 
 
 def bench_mcap(path: Path, t: np.ndarray, rows: list[np.ndarray]) -> float:
     from mcap.writer import CompressionType, Writer
-    encode = _encoder()
     t0 = time.perf_counter()
     with open(path, "wb") as f:
         w = Writer(f, compression=CompressionType.ZSTD)
         w.start()
-        chans = []
+        writes = []
         for i, width in enumerate(WIDTHS):
-            sid = w.register_schema(f"bench/msg/V{i}", "ros2msg",
-                                    "".join(f"float64 f{j}\n" for j in range(width + 1)).encode())
-            chans.append(w.register_channel(f"/c{i}", "cdr", sid))
-        next_flush = 1.0
-        for k in range(len(t)):
-            tk = float(t[k])
-            if tk >= next_flush:
-                w.flush()
-                next_flush += 1.0
-            ns = round(tk * 1e9)
-            for c, r in zip(chans, rows):
-                w.add_message(c, ns, encode(tk, r[k]), ns)
+            cid = w.register_channel(f"/c{i}", "cdr", w.register_schema(f"bench/msg/V{i}", "ros2msg", _ros2msg(width)))
+
+            def write(t_s: float, v: np.ndarray, cid: int = cid) -> None:
+                ns = round(t_s * 1e9)
+                w.add_message(cid, ns, _cdr(t_s, v), ns)
+            writes.append(write)
+        _loop(t, rows, writes, w.flush)
         w.finish()
     return time.perf_counter() - t0
 
@@ -102,7 +110,6 @@ def bench_foxglove(path: Path, t: np.ndarray, rows: list[np.ndarray]) -> float |
         from foxglove.mcap import MCAPCompression, MCAPWriteOptions
     except ImportError:
         return None
-    encode = _encoder()
     if path.exists():
         path.unlink()
     ctx = foxglove.Context()
@@ -110,48 +117,37 @@ def bench_foxglove(path: Path, t: np.ndarray, rows: list[np.ndarray]) -> float |
     w = foxglove.open_mcap(str(path), context=ctx, writer_options=MCAPWriteOptions(
         compression=MCAPCompression.Zstd, compression_threads=0))
     w.write_metadata("scenario", {"name": "bench"})
-    logs = []
+    writes = []
     for i, width in enumerate(WIDTHS):
-        schema = foxglove.Schema(name=f"bench/msg/V{i}", encoding="ros2msg",
-                                 data="".join(f"float64 f{j}\n" for j in range(width + 1)).encode())
-        logs.append(foxglove.Channel(f"/c{i}", schema=schema, message_encoding="cdr", context=ctx).base.log)
-    next_flush = 1.0
-    for k in range(len(t)):
-        tk = float(t[k])
-        if tk >= next_flush:
-            w.flush()
-            next_flush += 1.0
-        ns = round(tk * 1e9)
-        for log, r in zip(logs, rows):
-            log(encode(tk, r[k]), ns)
+        schema = foxglove.Schema(name=f"bench/msg/V{i}", encoding="ros2msg", data=_ros2msg(width))
+        log = foxglove.Channel(f"/c{i}", schema=schema, message_encoding="cdr", context=ctx).base.log
+
+        def write(t_s: float, v: np.ndarray, log=log) -> None:
+            log(_cdr(t_s, v), round(t_s * 1e9))
+        writes.append(write)
+    _loop(t, rows, writes, w.flush)
     w.close()
     return time.perf_counter() - t0
 
 
 def bench_loop_only(path: Path, t: np.ndarray, rows: list[np.ndarray]) -> float:
     """The same loop calling a do-nothing write: the cost every row above includes."""
-    class Null:
-        def write(self, t_s: float, values: np.ndarray) -> None:
-            pass
-    chans = [Null() for _ in WIDTHS]
+    def write(t_s: float, values: np.ndarray) -> None:
+        pass
     path.write_bytes(b"")
     t0 = time.perf_counter()
-    for k in range(len(t)):
-        tk = float(t[k])
-        for c, r in zip(chans, rows):
-            c.write(tk, r[k])
+    _loop(t, rows, [write] * len(WIDTHS))
     return time.perf_counter() - t0
 
 
-def bench_flightlog(path: Path, t: np.ndarray, rows: list[np.ndarray], compression: str | None) -> float:
+def bench_flightlog(path: Path, t: np.ndarray, rows: list, compression: str | None) -> float:
+    """FlightLogWriter; ``rows`` per channel: (n, width) arrays, or lists of tuples as the sim
+    loop passes for the pilot commands and the operating point."""
     t0 = time.perf_counter()
     with FlightLogWriter(path, metadata={"scenario": {"name": "bench"}}, compression=compression) as w:
         chans = [w.add_vector_channel(f"/c{i}", f"bench/msg/V{i}", ["t_s"] + [f"f{j}" for j in range(width)])
                  for i, width in enumerate(WIDTHS)]
-        for k in range(len(t)):
-            tk = float(t[k])
-            for c, r in zip(chans, rows):
-                c.write(tk, r[k])
+        _loop(t, rows, [c.write for c in chans])
     return time.perf_counter() - t0
 
 
@@ -160,7 +156,6 @@ def bench_compression(t: np.ndarray, rows: list[np.ndarray]) -> None:
     import lz4.frame
     import zstandard
 
-    from fdi_sim.flightlog.schemas import VectorBlock, build_chunk
     n = RATE_HZ
     blocks = [VectorBlock(i + 1, 0, t[:n], r[:n]) for i, r in enumerate(rows)]
     raw = bytes(build_chunk(blocks).records)
@@ -214,6 +209,8 @@ def main() -> None:
                 ("foxglove-sdk zstd", lambda p: bench_foxglove(p, t, rows))]
         runs += [(f"FlightLogWriter {c or 'none'}", lambda p, c=c: bench_flightlog(p, t, rows, c))
                  for c in ("zstd", "lz4", None)]
+        tuples = [[tuple(x) for x in r.tolist()] for r in rows]
+        runs.append(("FlightLogWriter zstd, tuples", lambda p: bench_flightlog(p, t, tuples, "zstd")))
         for name, fn in runs:
             p = Path(tmp) / "w.mcap"
             el = fn(p)

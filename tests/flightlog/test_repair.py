@@ -185,6 +185,28 @@ def test_damaged_chunk_is_dropped_and_the_rest_kept(tmp_path: Path) -> None:
     assert "dropped 1 damaged chunks" in report.format()
 
 
+@pytest.mark.parametrize("encoding", ["ros2msg", "jsonschema"])
+def test_schema_with_undecodable_text_is_dropped_with_its_channels(tmp_path: Path, encoding: str) -> None:
+    """Schema records carry no CRC: one whose text is not UTF-8 (or not JSON) is skipped, and
+    the channels that use it are dropped with their messages; the rest is kept."""
+    src = tmp_path / "full.mcap"
+    _small_log(src)
+    data = bytearray(src.read_bytes())
+    enc = encoding.encode()
+    name = b"fdi_sim/msg/TruthState" if encoding == "ros2msg" else b"fdi_sim/msg/Alarm"
+    text = data.index(enc, data.index(name)) + len(enc) + 4  # after the encoding and the u32 length
+    data[text] = 0xFF  # never valid in UTF-8
+    src.write_bytes(bytes(data))
+    report = repair_log(src)
+    assert report.records_skipped >= 1
+    dropped = "/truth/state" if encoding == "ros2msg" else "/fdi/alarms"
+    kept = {"/truth/state": 240, "/sensors/q": 80, "/fdi/alarms": 5}
+    del kept[dropped]
+    assert report.message_counts == kept
+    log = read_log(report.dst)
+    assert set(log.topics) == set(kept)
+
+
 def test_bad_sources_and_destinations(tmp_path: Path) -> None:
     text = tmp_path / "notes.txt"
     text.write_text("not a log\n")

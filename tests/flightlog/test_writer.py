@@ -25,8 +25,8 @@ from mcap.data_stream import RecordBuilder, ReadDataStream
 
 from fdi_sim.errors import LogError
 from fdi_sim.flightlog import FlightLogWriter, vector_schema
-from fdi_sim.flightlog.reader import scan_records
-from fdi_sim.flightlog.schemas import RawMessage, VectorBlock, build_chunk, encode_message_index
+from fdi_sim.flightlog.records import scan_records
+from fdi_sim.flightlog.records import RawMessage, VectorBlock, build_chunk, encode_message_index
 
 TRUTH = ("t_s", "alpha_rad", "q_radps", "vt_fps")
 SENS = ("t_s", "q_meas_radps")
@@ -203,6 +203,24 @@ def test_flush_follows_simulated_time(tmp_path: Path) -> None:
     assert ranges == [(0, round(119 / 120 * 1e9)), (10**9, round(239 / 120 * 1e9)), (2 * 10**9, 2 * 10**9)]
 
 
+def test_an_event_alone_crossing_a_window_flushes(tmp_path: Path) -> None:
+    """Events go through the same time check as vector rows: one written past the window
+    boundary first puts the buffered messages on disk as a chunk."""
+    path = tmp_path / "a.mcap"
+    w = FlightLogWriter(path, flush_period_s=1.0)
+    ev = w.add_event_channel("/sim/status", "fdi_sim/msg/Status", {"type": "object"})
+    ev.write(0.2, {"k": 0})
+    ev.write(0.9, {"k": 1})
+    assert not [op for op, _, _ in scan_records(path.read_bytes(), 8) if op == 0x06]
+    ev.write(1.5, {"k": 2})
+    assert [op for op, _, _ in scan_records(path.read_bytes(), 8) if op == 0x06] == [0x06]
+    assert w.last_flush_t_s == 1.5
+    w.close()
+    with open(path, "rb") as f:
+        ranges = [(c.message_start_time, c.message_end_time) for c in make_reader(f).get_summary().chunk_indexes]
+    assert ranges == [(2 * 10**8, 9 * 10**8), (15 * 10**8, 15 * 10**8)]
+
+
 def test_late_start_and_gaps_keep_whole_second_windows(tmp_path: Path) -> None:
     path = tmp_path / "a.mcap"
     with FlightLogWriter(path, flush_period_s=0.5) as w:
@@ -292,7 +310,8 @@ def test_bad_times_raise(tmp_path: Path, t_s: object) -> None:
             ev.write(t_s, {})  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("values", [[1.0, 2.0], [1.0, 2.0, 3.0, 4.0], 1.0, ["a", "b", "c"], np.zeros((3, 1))])
+@pytest.mark.parametrize("values", [[1.0, 2.0], [1.0, 2.0, 3.0, 4.0], 1.0, ["a", "b", "c"], np.zeros((3, 1)),
+                                    (1.0, 2.0), ("a", "b", "c"), np.zeros(4)])
 def test_wrong_values_raise_with_the_fields(tmp_path: Path, values: object) -> None:
     with FlightLogWriter(tmp_path / "a.mcap") as w:
         ch = w.add_vector_channel("/truth/state", "fdi_sim/msg/TruthState", TRUTH)
