@@ -91,5 +91,5 @@ def test_sigkill_halfway_then_repair(tmp_path: Path, f16_text: str) -> None:
     assert t[-1] > 5.0
     # every step present from 0 to the last recovered time: nothing lost but the unflushed tail
     assert len(t) == round(t[-1] * 120) + 1
-    statuses = [e.payload["event"] for e in rep.topics["/sim/status"].events]
-    assert statuses == ["start"]
+    statuses = [e.payload["status"] for e in rep.topics["/sim/status"].events]
+    assert statuses == ["running"]  # killed: no end record

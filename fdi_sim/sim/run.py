@@ -22,30 +22,23 @@ import numpy as np
 from fdi_sim import registry
 from fdi_sim.aircraft import COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, trim
 from fdi_sim.errors import LogError, ScenarioError, SimulationDiverged
-from fdi_sim.flightlog import FlightLogWriter
+from fdi_sim.flightlog import (
+    STATUS_JSON_SCHEMA,
+    TOPIC_COMMANDS,
+    TOPIC_OPERATING_POINT,
+    TOPIC_SENSORS,
+    TOPIC_SIM_STATUS,
+    TOPIC_SURFACES,
+    TOPIC_TRUTH_STATE,
+    FlightLogWriter,
+)
 from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimPoint
 from fdi_sim.scenario import Scenario
 from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
 from fdi_sim.units import DEG_PER_RAD, FPS_PER_KT, RAD_PER_DEG
 
-#: topic names (DESIGN.md: topics by stage)
-TOPIC_TRUTH = "/truth/state"
-TOPIC_SURFACES = "/truth/surfaces"
-TOPIC_OP = "/truth/operating_point"
-TOPIC_COMMANDS = "/commands/pilot"
-TOPIC_SENSORS = "/sensors/measurements"
-TOPIC_STATUS = "/sim/status"
 OP_SIGNALS = ("h_ft", "vc_kts", "mach", "alpha_rad", "flaps_deg", "icing_eta")
 PILOT_FIELDS = COMMAND_SIGNALS + ("h_ref_ft", "vc_ref_kts", "psi_ref_rad", "phi_ref_rad")
-
-_STATUS_SCHEMA = {
-    "type": "object",
-    "properties": {
-        "event": {"type": "string"}, "status": {"type": "string"}, "reason": {"type": "string"},
-        "t_s": {"type": "number"},
-    },
-}
-
 
 @dataclass(frozen=True)
 class RunSummary:
@@ -196,15 +189,15 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         sensors.reset(np.random.default_rng(ss_sensors))
         pilot = build_pilot(sc, tr, sensors.names)
         pilot.reset(np.random.default_rng(ss_pilot))
-        ch_truth = writer.add_vector_channel(TOPIC_TRUTH, "fdi_sim/msg/TruthState", ("t_s",) + TRUTH_SIGNALS)
+        ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + TRUTH_SIGNALS)
         ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
-        ch_op = writer.add_vector_channel(TOPIC_OP, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
+        ch_op = writer.add_vector_channel(TOPIC_OPERATING_POINT, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
         ch_cmd = writer.add_vector_channel(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
         ch_meas = writer.add_vector_channel(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
-        ch_status = writer.add_event_channel(TOPIC_STATUS, "fdi_sim/msg/SimStatus", _STATUS_SCHEMA)
-        ch_status.write(0.0, {"event": "start", "status": "running", "reason": tr.method + " trim", "t_s": 0.0})
+        ch_status = writer.add_event_channel(TOPIC_SIM_STATUS, "fdi_sim/msg/SimStatus", STATUS_JSON_SCHEMA)
+        ch_status.write(0.0, {"status": "running", "message": f"trimmed ({tr.method} trim), flying"})
         status, reason, t_s, k, stats = _loop(sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress)
-        ch_status.write(t_s, {"event": "end", "status": status, "reason": reason, "t_s": t_s})
+        ch_status.write(t_s, {"status": status, "message": reason})
     finally:
         writer.close()
     wall = time.perf_counter() - wall0
