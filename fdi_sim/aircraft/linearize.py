@@ -1,6 +1,9 @@
-"""JSBSim side of the linearizer: central differences about a trim, FGLinearization, doublet runs.
+"""JSBSim side of the linearizer: central differences about a trim.
 
-Everything here drives JSBSim; the maths on the resulting matrices (body -> aero transform,
+The JSBSim side is four modules: this one (the Jacobians), :mod:`.linearize_state` (signal
+sets, writing a state into JSBSim, capturing and restoring a trim), :mod:`.linearize_fglin`
+(JSBSim's own FGLinearization, the F-16 cross-check) and :mod:`.linearize_response` (the
+nonlinear doublet runs). The maths on the resulting matrices (body -> aero transform,
 discretization, modes, validation metrics) lives in :mod:`fdi_sim.linear`.
 
 Central differences (JSBSIM_NOTES sec. 4.2, extended)
@@ -30,47 +33,25 @@ Engines
 * ``"dynamic"`` (DHC-6 default): states ``n1_pct`` (PT6A gas generator, first-order lag of 1 s
   up, 2.4 s down in ``FGTurboProp::Run``; the central difference averages the two slopes) and
   ``prop_rpm`` (propeller on its fine-pitch stop, torque balance). Both engines are moved
-  together, so each state is the mean of the two engines. A quasi-static DHC-6 model misses a
-  1-2 s thrust lag (measured: thrust reaches 63 % of a throttle step after about 1.5 s).
+  together, so each state is the mean of the two engines. A quasi-static DHC-6 model misses
+  this 1-2 s thrust lag (the N1 row against the engine source: ``test_dhc6_engine_rows_follow_the_engine_source``).
 """
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Mapping
 
-import jsbsim
 import numpy as np
 from numpy.typing import NDArray
 
+from fdi_sim.aircraft.linearize_state import (
+    BODY_STATES, CONTROL_INPUTS, ENGINE_STATES, GUST_INPUTS, GUST_PROPS, OPTIONAL_DISTURBANCES, SENSOR_OUTPUTS,
+    TrimState, capture_trim, has_propeller, set_state, wrap_rad,
+)
 from fdi_sim.aircraft.model import Aircraft
-from fdi_sim.aircraft.trim import TrimResult, trim
+from fdi_sim.aircraft.trim import TrimResult
 from fdi_sim.errors import DesignError
-from fdi_sim.operating_point import OperatingPoint
-
-#: body-axis state of the central differences, in order
-BODY_STATES: tuple[str, ...] = (
-    "u_body_fps", "v_body_fps", "w_body_fps", "p_radps", "q_radps", "r_radps",
-    "phi_rad", "theta_rad", "psi_rad", "h_ft",
-)
-#: engine states added by the dynamic engine model (mean of all engines)
-ENGINE_STATES: tuple[str, ...] = ("n1_pct", "prop_rpm")
-#: the sensor suite of the foundation issue, in order
-SENSOR_OUTPUTS: tuple[str, ...] = (
-    "p_radps", "q_radps", "r_radps", "nx_g", "ny_g", "nz_g", "phi_rad", "theta_rad", "psi_rad",
-    "vc_kts", "alpha_rad", "beta_rad", "h_ft", "hdot_fps",
-)
-#: outputs JSBSim computes in FGAuxiliary from the accelerations of the *previous* step
-#: (FGAuxiliary runs before FGAccelerations in FGFDMExec::Run): measured one step late
-LAGGED_OUTPUTS: tuple[str, ...] = ("nx_g", "ny_g", "nz_g")
-#: pilot commands (control inputs); the throttle goes to every engine
-CONTROL_INPUTS: tuple[str, ...] = ("elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm", "throttle_cmd_norm")
-#: body-axis velocity of the air mass (a gust of +u_gust blows from behind) [ft/s]
-GUST_INPUTS: tuple[str, ...] = ("u_gust_body_fps", "v_gust_body_fps", "w_gust_body_fps")
-#: optional disturbance columns that exist only when the model has the property
-#: (the iced overlay declares ``icing/eta``; JSBSIM_NOTES sec. 5.3)
-OPTIONAL_DISTURBANCES: dict[str, tuple[str, float]] = {"icing_eta": ("icing/eta", 0.005)}
 
 _DERIV_PROPS: tuple[str, ...] = (
     "accelerations/udot-ft_sec2", "accelerations/vdot-ft_sec2", "accelerations/wdot-ft_sec2",
@@ -78,13 +59,9 @@ _DERIV_PROPS: tuple[str, ...] = (
     "velocities/phidot-rad_sec", "velocities/thetadot-rad_sec", "velocities/psidot-rad_sec",
     "velocities/h-dot-fps",
 )
-_STATE_PROPS: tuple[str, ...] = (
-    "velocities/u-fps", "velocities/v-fps", "velocities/w-fps",
-    "velocities/p-rad_sec", "velocities/q-rad_sec", "velocities/r-rad_sec",
-    "attitude/phi-rad", "attitude/theta-rad", "attitude/psi-rad", "position/h-sl-ft",
-)
-_GUST_PROPS: tuple[str, ...] = ("atmosphere/gust-north-fps", "atmosphere/gust-east-fps", "atmosphere/gust-down-fps")
 _PSI = BODY_STATES.index("psi_rad")
+_PSI_Y = SENSOR_OUTPUTS.index("psi_rad")
+_ENGINE_MODELS: tuple[str, ...] = ("auto", "dynamic", "quasi_static")
 
 
 @dataclass(frozen=True)
@@ -103,7 +80,7 @@ class FDSettings:
         Command step [-].
     step_n1_pct : float
         Gas-generator speed step [%].
-    step_rpm_throttle : float
+    step_rpm_throttle_norm : float
         Throttle offset used while the engines settle, to move the propeller speed [-].
     n_settle : int
         Tiny real steps per evaluation.
@@ -119,7 +96,7 @@ class FDSettings:
     step_h_ft: float = 1.0
     step_cmd_norm: float = 1e-3
     step_n1_pct: float = 0.1
-    step_rpm_throttle: float = 0.005
+    step_rpm_throttle_norm: float = 0.005
     n_settle: int = 5
     dt_eval_s: float = 1e-6
     engine: str = "auto"
@@ -181,173 +158,92 @@ class _Eval:
 
 
 def engine_model(ac: Aircraft, settings: FDSettings) -> str:
-    """The engine model used for ``ac``: ``"dynamic"`` or ``"quasi_static"``."""
-    if settings.engine in ("dynamic", "quasi_static"):
-        return settings.engine
-    if settings.engine != "auto":
+    """The engine model used for ``ac``: ``"dynamic"`` or ``"quasi_static"``.
+
+    Raises
+    ------
+    DesignError
+        An unknown ``settings.engine``, or ``"dynamic"`` for an aircraft without propellers
+        (its engine states are the propeller's).
+    """
+    if settings.engine not in _ENGINE_MODELS:
         raise DesignError(f"FDSettings.engine = {settings.engine!r}; use 'auto', 'dynamic' or 'quasi_static'")
-    return "dynamic" if ac.fdm.get_property_manager().hasNode("propulsion/engine[0]/propeller-rpm") else "quasi_static"
-
-
-def body_to_ned(phi_rad: float, theta_rad: float, psi_rad: float) -> NDArray[np.float64]:
-    """Rotation matrix from body to local NED axes (3-2-1 Euler angles) [-]."""
-    cf, sf = math.cos(phi_rad), math.sin(phi_rad)
-    ct, st = math.cos(theta_rad), math.sin(theta_rad)
-    cp, sp = math.cos(psi_rad), math.sin(psi_rad)
-    # T_b2n = R_z(psi) R_y(theta) R_x(phi)
-    return np.array([
-        [ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp],
-        [ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp],
-        [-st, sf * ct, cf * ct],
-    ])
-
-
-@dataclass(frozen=True, eq=False)
-class TrimState:
-    """Everything needed to put the aircraft back exactly at a trim (see :func:`restore_trim`).
-
-    Attributes
-    ----------
-    op : OperatingPoint
-        The trimmed operating point.
-    x_body : NDArray
-        :data:`BODY_STATES` at the trim [ft/s, rad/s, rad, ft].
-    u_cmd : NDArray
-        :data:`CONTROL_INPUTS` at the trim [-].
-    pitch_trim_cmd_norm : float
-        Pitch-trim command held [-].
-    n1_pct : float
-        Mean gas-generator speed of the dynamic engine model at the trim [%] (0 if unused).
-    """
-
-    op: OperatingPoint
-    x_body: NDArray[np.float64]
-    u_cmd: NDArray[np.float64]
-    pitch_trim_cmd_norm: float
-    n1_pct: float = 0.0
-
-
-def capture_trim(ac: Aircraft, tr: TrimResult) -> TrimState:
-    """Record the trimmed state of ``ac`` (call right after :func:`~fdi_sim.aircraft.trim.trim`)."""
-    fdm = ac.fdm
-    n1 = 0.0
-    if fdm.get_property_manager().hasNode("propulsion/engine[0]/propeller-rpm"):  # dynamic engine model
-        n1 = float(np.mean([fdm[f"propulsion/engine[{i}]/n1"] for i in range(ac.n_engines)]))
-    return TrimState(
-        op=tr.op, x_body=np.array([fdm[p] for p in _STATE_PROPS]),
-        u_cmd=np.array([tr.elevator_cmd_norm, tr.aileron_cmd_norm, tr.rudder_cmd_norm, tr.throttle_cmd_norm]),
-        pitch_trim_cmd_norm=float(fdm["fcs/pitch-trim-cmd-norm"]), n1_pct=n1,
-    )
-
-
-def set_state(ac: Aircraft, ts: TrimState, x: NDArray[np.float64], u: NDArray[np.float64],
-              gust_body_fps: NDArray[np.float64] | None = None, n1_pct: float | None = None,
-              thr_settle: float = 0.0) -> None:
-    """Write a body state and commands into JSBSim (IC + ``run_ic``), engines at a steady state.
-
-    Parameters
-    ----------
-    x, u : NDArray
-        :data:`BODY_STATES` and :data:`CONTROL_INPUTS` values.
-    gust_body_fps : NDArray, optional
-        Air-mass velocity in body axes at the trim attitude [ft/s]; JSBSim gusts persist through
-        ``run_ic`` (its IC wind does not).
-    n1_pct : float, optional
-        Gas-generator speed to set after the engines settled [%].
-    thr_settle : float
-        Throttle offset used while the engines settle, removed afterwards (moves the propeller
-        speed, which JSBSim does not let us write) [-].
-    """
-    fdm = ac.fdm
-    g_ned = body_to_ned(*ts.x_body[6:9]) @ (np.zeros(3) if gust_body_fps is None else gust_body_fps)
-    for prop, v in zip(_GUST_PROPS, g_ned):
-        fdm[prop] = v
-    # attitude first: body velocities written after it are kept (JSBSIM_NOTES 4.2)
-    fdm["ic/phi-rad"], fdm["ic/theta-rad"], fdm["ic/psi-true-rad"] = x[6], x[7], x[8]
-    fdm["ic/u-fps"], fdm["ic/v-fps"], fdm["ic/w-fps"] = x[0], x[1], x[2]
-    fdm["ic/p-rad_sec"], fdm["ic/q-rad_sec"], fdm["ic/r-rad_sec"] = x[3], x[4], x[5]
-    fdm["ic/h-sl-ft"] = x[9]
-    fdm["fcs/pitch-trim-cmd-norm"] = ts.pitch_trim_cmd_norm
-    fdm["fcs/elevator-cmd-norm"], fdm["fcs/aileron-cmd-norm"], fdm["fcs/rudder-cmd-norm"] = u[0], u[1], u[2]
-    for i in range(ac.n_engines):
-        fdm[f"fcs/throttle-cmd-norm[{i}]"] = u[3] + thr_settle
-    fdm.set_trim_status(True)
-    fdm.run_ic()  # actuators jump to their commands
-    fdm.set_trim_status(False)
-    fdm.get_propulsion().get_steady_state()  # engines settle (the turboprop leaves its trim phase)
-    if thr_settle:
-        for i in range(ac.n_engines):
-            fdm[f"fcs/throttle-cmd-norm[{i}]"] = u[3]
-    if n1_pct is not None:
-        for i in range(ac.n_engines):
-            fdm[f"propulsion/engine[{i}]/n1"] = n1_pct
-
-
-def restore_trim(ac: Aircraft, ts: TrimState) -> None:
-    """Put ``ac`` back at the trim ``ts`` (same state, commands and engine; gusts zero)."""
-    set_state(ac, ts, ts.x_body, ts.u_cmd, None, ts.n1_pct if ts.n1_pct else None)
+    propeller = has_propeller(ac)
+    if settings.engine == "auto":
+        return "dynamic" if propeller else "quasi_static"
+    if settings.engine == "dynamic" and not propeller:
+        raise DesignError(f"FDSettings.engine = 'dynamic' needs propeller engines (states {ENGINE_STATES}); "
+                          f"{ac.name} has none: use 'auto' or 'quasi_static'")
+    return settings.engine
 
 
 class _Evaluator:
-    """Sets a perturbed state/input in JSBSim and reads derivatives and outputs."""
+    """Sets a perturbed state/input in JSBSim and reads derivatives and outputs.
 
-    def __init__(self, ac: Aircraft, ts: TrimState, engine: str, settings: FDSettings,
-                 extra: Mapping[str, tuple[str, float]]) -> None:
-        self.ac, self.fdm, self.ts, self.s, self.engine = ac, ac.fdm, ts, settings, engine
-        fdm = ac.fdm
-        self.n_eng = ac.n_engines
-        self.x_trim = ts.x_body.copy()
-        self.u_ctrl_trim = ts.u_cmd.copy()
-        self.extra = dict(extra)
-        self.extra_trim = np.array([fdm[p] for p, _ in self.extra.values()])
+    The perturbed vector ``v`` is :data:`BODY_STATES`, :data:`CONTROL_INPUTS`,
+    :data:`GUST_INPUTS` and the extra disturbances, in that order.
+    """
+
+    def __init__(self, ac: Aircraft, ts: TrimState, dynamic: bool, settings: FDSettings,
+                 extra_props: list[str]) -> None:
+        self.ac, self.ts, self.dynamic, self.s, self.extra_props = ac, ts, dynamic, settings, extra_props
+        nx, nu, ng = len(BODY_STATES), len(CONTROL_INPUTS), len(GUST_INPUTS)
+        self.splits = (nx, nx + nu, nx + nu + ng)
+        self.read_x = ac.reader(BODY_STATES)
         self.read_y = ac.reader(SENSOR_OUTPUTS)
-        self.n1_props = [f"propulsion/engine[{i}]/n1" for i in range(self.n_eng)]
-        self.rpm_props = [f"propulsion/engine[{i}]/propeller-rpm" for i in range(self.n_eng)]
-        self.n1_trim = ts.n1_pct
+        self.n1_props = [f"propulsion/engine[{i}]/n1" for i in range(ac.n_engines)]
+        self.rpm_props = [f"propulsion/engine[{i}]/propeller-rpm" for i in range(ac.n_engines)]
 
-    def _set(self, x: NDArray[np.float64], u: NDArray[np.float64], gust_b: NDArray[np.float64],
-             extra: NDArray[np.float64], n1: float | None, thr_settle: float) -> None:
-        for (prop, _), v in zip(self.extra.values(), extra):
-            self.fdm[prop] = v
-        set_state(self.ac, self.ts, x, u, gust_b, n1, thr_settle)
-
-    def evaluate(self, x: NDArray[np.float64], u: NDArray[np.float64], gust_b: NDArray[np.float64],
-                 extra: NDArray[np.float64], n1: float | None = None, thr_settle: float = 0.0) -> _Eval:
-        fdm = self.fdm
-        dyn = self.engine == "dynamic"
-        self._set(x, u, gust_b, extra, n1 if dyn else None, thr_settle)
+    def evaluate(self, v: NDArray[np.float64], dn1_pct: float = 0.0, thr_settle_norm: float = 0.0) -> _Eval:
+        """Derivatives and outputs at ``v``; the dynamic engine's N1 offset by ``dn1_pct`` [%]."""
+        fdm = self.ac.fdm
+        x, u, gust_b, extra = np.split(v, self.splits)
+        for prop, val in zip(self.extra_props, extra):
+            fdm[prop] = val
+        n1 = self.ts.n1_pct + dn1_pct if self.dynamic and self.ts.n1_pct is not None else None
+        set_state(self.ac, self.ts, x, u, gust_b, n1, thr_settle_norm)
         fdm.set_dt(self.s.dt_eval_s)
         try:
             eng_before = np.zeros(2)
             for _ in range(self.s.n_settle):
-                if dyn:
+                if self.dynamic:
                     eng_before = self._engine_state()
                 fdm.run()
         finally:
             fdm.set_dt(self.ac.dt_s)
-        xr = np.array([fdm[p] for p in _STATE_PROPS])
-        xr[_PSI] = x[_PSI] + _wrap(xr[_PSI] - x[_PSI])
+        xr = self.read_x()
+        xr[_PSI] = x[_PSI] + wrap_rad(xr[_PSI] - x[_PSI])
         xdot = np.array([fdm[p] for p in _DERIV_PROPS])
         y = self.read_y()
-        y[SENSOR_OUTPUTS.index("psi_rad")] = x[_PSI] + _wrap(y[SENSOR_OUTPUTS.index("psi_rad")] - x[_PSI])
-        parts_z = [xr]
-        parts_f = [xdot]
-        if dyn:
-            eng_after = self._engine_state()
-            # the state at the start of the last step and its rate over that step
-            parts_z.append(eng_before)
-            parts_f.append((eng_after - eng_before) / self.s.dt_eval_s)
-        parts_z += [u, gust_b, extra]
-        parts_f.append(y)
-        return _Eval(z=np.concatenate(parts_z), f=np.concatenate(parts_f))
+        y[_PSI_Y] = x[_PSI] + wrap_rad(y[_PSI_Y] - x[_PSI])
+        if not self.dynamic:
+            return _Eval(z=np.concatenate([xr, u, gust_b, extra]), f=np.concatenate([xdot, y]))
+        # engine: the state at the start of the last tiny step and its rate over that step
+        eng_rate = (self._engine_state() - eng_before) / self.s.dt_eval_s
+        return _Eval(z=np.concatenate([xr, eng_before, u, gust_b, extra]), f=np.concatenate([xdot, eng_rate, y]))
 
     def _engine_state(self) -> NDArray[np.float64]:
-        fdm = self.fdm
+        fdm = self.ac.fdm
         return np.array([np.mean([fdm[p] for p in self.n1_props]), np.mean([fdm[p] for p in self.rpm_props])])
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
+def _disturbance_columns(ac: Aircraft, extra_disturbances: Mapping[str, tuple[str, float]] | None
+                         ) -> tuple[dict[str, tuple[str, float]], list[str]]:
+    """The extra disturbance columns ``name -> (property, step)`` and notes on the optional ones left out."""
+    pm = ac.fdm.get_property_manager()
+    extra: dict[str, tuple[str, float]] = {}
+    notes: list[str] = []
+    for name, (prop, step) in OPTIONAL_DISTURBANCES.items():
+        if pm.hasNode(prop):
+            extra[name] = (prop, step)
+        else:
+            notes.append(f"{name}: JSBSim model {ac.name} has no property {prop} (overlay not available)")
+    for name, (prop, step) in (extra_disturbances or {}).items():
+        if not pm.hasNode(prop):
+            raise DesignError(f"extra disturbance {name!r}: {ac.name} has no property {prop!r}; "
+                              "pick an existing writable property")
+        extra[name] = (prop, float(step))
+    return extra, notes
 
 
 def central_difference(ac: Aircraft, tr: TrimResult, settings: FDSettings | None = None,
@@ -387,65 +283,43 @@ def central_difference(ac: Aircraft, tr: TrimResult, settings: FDSettings | None
     t_start = time.perf_counter()
     s = settings or FDSettings()
     engine = engine_model(ac, s)
-    pm = ac.fdm.get_property_manager()
-    extra: dict[str, tuple[str, float]] = {}
-    notes: list[str] = []
-    for name, (prop, step) in OPTIONAL_DISTURBANCES.items():
-        if pm.hasNode(prop):
-            extra[name] = (prop, step)
-        else:
-            notes.append(f"{name}: JSBSim model {ac.name} has no property {prop} (overlay not available)")
-    for name, (prop, step) in (extra_disturbances or {}).items():
-        if not pm.hasNode(prop):
-            raise DesignError(f"extra disturbance {name!r}: {ac.name} has no property {prop!r}; "
-                              "pick an existing writable property")
-        extra[name] = (prop, float(step))
+    extra, notes = _disturbance_columns(ac, extra_disturbances)
     ts = capture_trim(ac, tr)
-    ev = _Evaluator(ac, ts, engine, s, extra)
-    x_t, u_t, g_t, e_t = ev.x_trim, ev.u_ctrl_trim, np.zeros(3), ev.extra_trim
-    n1_t = ev.n1_trim if engine == "dynamic" else None
+    extra_props = [prop for prop, _ in extra.values()]
+    extra_trim = np.array([ac[p] for p in extra_props])
+    ev = _Evaluator(ac, ts, engine == "dynamic", s, extra_props)
+    # the knob vector (states, commands, gusts, extras) at the trim and the step of each knob
+    v0 = np.concatenate([ts.x_body, ts.u_cmd, np.zeros(len(GUST_INPUTS)), extra_trim])
+    h = np.concatenate([[s.step_vel_fps] * 3 + [s.step_angle_rad] * 6 + [s.step_h_ft],
+                        [s.step_cmd_norm] * len(CONTROL_INPUTS), [s.step_vel_fps] * len(GUST_INPUTS),
+                        [step for _, step in extra.values()]])
+    dZ, dF = [], []
+
+    def knob(plus: _Eval, minus: _Eval) -> None:
+        dZ.append(plus.z - minus.z)
+        dF.append(plus.f - minus.f)
+
+    def axis_knob(i: int) -> None:
+        e = np.zeros(v0.size)
+        e[i] = h[i]
+        knob(ev.evaluate(v0 + e), ev.evaluate(v0 - e))
+
+    nx = len(BODY_STATES)
     try:
-        center = ev.evaluate(x_t, u_t, g_t, e_t, n1_t)
-        h_x = np.array([s.step_vel_fps] * 3 + [s.step_angle_rad] * 6 + [s.step_h_ft])
-        dZ, dF = [], []
-
-        def knob(fn: Callable[[float], _Eval]) -> None:
-            plus, minus = fn(+1.0), fn(-1.0)
-            dZ.append(plus.z - minus.z)
-            dF.append(plus.f - minus.f)
-
-        for i in range(len(BODY_STATES)):
-            def fx(sg: float, i: int = i) -> _Eval:
-                x = x_t.copy()
-                x[i] += sg * h_x[i]
-                return ev.evaluate(x, u_t, g_t, e_t, n1_t)
-            knob(fx)
-        if engine == "dynamic":
-            knob(lambda sg: ev.evaluate(x_t, u_t, g_t, e_t, n1_t + sg * s.step_n1_pct))
-            knob(lambda sg: ev.evaluate(x_t, u_t, g_t, e_t, n1_t, thr_settle=sg * s.step_rpm_throttle))
-        for j in range(len(CONTROL_INPUTS)):
-            def fu(sg: float, j: int = j) -> _Eval:
-                u = u_t.copy()
-                u[j] += sg * s.step_cmd_norm
-                return ev.evaluate(x_t, u, g_t, e_t, n1_t)
-            knob(fu)
-        for j in range(3):
-            def fg(sg: float, j: int = j) -> _Eval:
-                g = np.zeros(3)
-                g[j] = sg * s.step_vel_fps
-                return ev.evaluate(x_t, u_t, g, e_t, n1_t)
-            knob(fg)
-        for j, (_, step) in enumerate(extra.values()):
-            def fe(sg: float, j: int = j, step: float = step) -> _Eval:
-                e = e_t.copy()
-                e[j] += sg * step
-                return ev.evaluate(x_t, u_t, g_t, e, n1_t)
-            knob(fe)
+        center = ev.evaluate(v0)
+        for i in range(nx):
+            axis_knob(i)
+        if engine == "dynamic":  # N1 directly; the propeller speed through the settling throttle
+            knob(ev.evaluate(v0, dn1_pct=s.step_n1_pct), ev.evaluate(v0, dn1_pct=-s.step_n1_pct))
+            knob(ev.evaluate(v0, thr_settle_norm=s.step_rpm_throttle_norm),
+                 ev.evaluate(v0, thr_settle_norm=-s.step_rpm_throttle_norm))
+        for i in range(nx, v0.size):
+            axis_knob(i)
     finally:
-        for prop in _GUST_PROPS:
+        for prop in GUST_PROPS:
             ac.fdm[prop] = 0.0
-        for (prop, _), v in zip(extra.values(), e_t):
-            ac.fdm[prop] = v
+        for prop, val in zip(extra_props, extra_trim):
+            ac.fdm[prop] = val
     Z = np.array(dZ).T  # columns: reached differences of each knob
     F = np.array(dF).T
     cond = float(np.linalg.cond(Z))
@@ -456,185 +330,11 @@ def central_difference(ac: Aircraft, tr: TrimResult, settings: FDSettings | None
     M = np.linalg.solve(Z.T, F.T).T  # M dZ = dF
     states = BODY_STATES + (ENGINE_STATES if engine == "dynamic" else ())
     n = len(states)
-    inputs = CONTROL_INPUTS + GUST_INPUTS + tuple(extra)
     kinds = ("control",) * len(CONTROL_INPUTS) + ("disturbance",) * (len(GUST_INPUTS) + len(extra))
-    zc = center.z
     return BodyJacobians(
         A=M[:n, :n], B=M[:n, n:], C=M[n:, :n], D=M[n:, n:],
-        state_names=states, input_names=inputs, output_names=SENSOR_OUTPUTS, input_kinds=kinds,
-        x0=zc[:n], u0=np.concatenate([u_t, g_t, e_t]), y0=center.f[n:], xdot0=center.f[:n],
+        state_names=states, input_names=CONTROL_INPUTS + GUST_INPUTS + tuple(extra), output_names=SENSOR_OUTPUTS,
+        input_kinds=kinds, x0=center.z[:n], u0=v0[nx:], y0=center.f[n:], xdot0=center.f[:n],
         knob_condition=cond, engine=engine, elapsed_s=time.perf_counter() - t_start, notes=tuple(notes),
     )
 
-
-# ---------------------------------------------------------------------- JSBSim's FGLinearization
-@dataclass(frozen=True, eq=False)
-class JsbsimLinearization:
-    """The result of JSBSim's own ``FGLinearization`` (JSBSIM_NOTES sec. 4.1).
-
-    Attributes
-    ----------
-    A, B : NDArray
-        State and input matrices in JSBSim's state order and units.
-    x_names, x_units, u_names : tuple of str
-        JSBSim's names (``Vt``, ``Alpha``, ... ``Alt``; ``ThtlCmd``, ``DaCmd``, ``DeCmd``, ``DrCmd``).
-    x0, u0 : NDArray
-        Trim values.
-    elapsed_s : float
-        Wall time [s].
-    """
-
-    A: NDArray[np.float64]
-    B: NDArray[np.float64]
-    x_names: tuple[str, ...]
-    x_units: tuple[str, ...]
-    u_names: tuple[str, ...]
-    x0: NDArray[np.float64]
-    u0: NDArray[np.float64]
-    elapsed_s: float
-
-
-def fglinearization(ac: Aircraft, allow_propeller: bool = False) -> JsbsimLinearization:
-    """Run JSBSim's ``FGLinearization`` about the current (just trimmed) state.
-
-    Call it right after JSBSim's own trim. For propeller aircraft its ``Rpm`` rows and throttle
-    column are wrong (the real step inside hits the turboprop N1 reset), and after the
-    running-engine trim of the DHC-6 it does not converge (more than 15 min, JSBSIM_NOTES
-    4.1), so it is refused unless ``allow_propeller`` (and then only right after JSBSim's trim).
-
-    Raises
-    ------
-    DesignError
-        Propeller aircraft without ``allow_propeller``.
-    """
-    if engine_model(ac, FDSettings()) == "dynamic" and not allow_propeller:
-        raise DesignError(f"FGLinearization is not reliable for the propeller aircraft {ac.name} (Rpm rows and "
-                          "throttle column wrong, no convergence after the running trim); use central_difference, "
-                          "or pass allow_propeller=True right after a plain JSBSim trim")
-    t0 = time.perf_counter()
-    try:
-        lin = jsbsim.FGLinearization(ac.fdm)
-        A, B, _, _ = lin.state_space
-    finally:
-        # FGLinearization leaves the integration suspended (dt = 0): give the aircraft its step back
-        if ac.fdm.integration_suspended():
-            ac.fdm.resume_integration()
-        ac.fdm.set_dt(ac.dt_s)
-    return JsbsimLinearization(
-        A=np.array(A, dtype=float), B=np.array(B, dtype=float), x_names=tuple(lin.x_names),
-        x_units=tuple(lin.x_units), u_names=tuple(lin.u_names), x0=np.array(lin.x0, dtype=float),
-        u0=np.array(lin.u0, dtype=float), elapsed_s=time.perf_counter() - t0,
-    )
-
-
-# ---------------------------------------------------------------------- nonlinear responses
-@dataclass(frozen=True, eq=False)
-class NonlinearResponse:
-    """Outputs of a JSBSim run from a trim with input deviations applied.
-
-    Attributes
-    ----------
-    t_s : NDArray
-        Time after each step [s], shape (N,).
-    y : NDArray
-        Absolute outputs after each step, shape (N, p), ``psi_rad`` unwrapped.
-    output_names : tuple of str
-        Output order.
-    """
-
-    t_s: NDArray[np.float64]
-    y: NDArray[np.float64]
-    output_names: tuple[str, ...]
-
-
-def simulate_inputs(ac: Aircraft, ts: TrimState, input_names: Sequence[str], du: NDArray[np.float64],
-                    output_names: Sequence[str] = SENSOR_OUTPUTS,
-                    extra_disturbances: Mapping[str, tuple[str, float]] | None = None) -> NonlinearResponse:
-    """Fly ``len(du)`` steps from the trim ``ts`` with input deviations ``du`` added to it.
-
-    Parameters
-    ----------
-    ac : Aircraft
-        The aircraft; put back at ``ts`` first (:func:`restore_trim`), so every run starts
-        from the same state.
-    ts : TrimState
-        The trim (from :func:`capture_trim`).
-    input_names : sequence of str
-        Names of the columns of ``du``: :data:`CONTROL_INPUTS`, :data:`GUST_INPUTS` (body axes at
-        the trim attitude, applied as JSBSim gusts) or extra disturbances.
-    du : NDArray
-        Input deviations, shape (N, m); row k is applied before step k [units of the names].
-    output_names : sequence of str
-        Signals to record after each step.
-    extra_disturbances : mapping, optional
-        ``name -> (property, step)`` for extra disturbance columns.
-
-    Returns
-    -------
-    NonlinearResponse
-    """
-    du = np.atleast_2d(np.asarray(du, dtype=float))
-    names = tuple(input_names)
-    if du.shape[1] != len(names):
-        raise DesignError(f"du has {du.shape[1]} columns but {len(names)} input names were given")
-    extras = {**OPTIONAL_DISTURBANCES, **dict(extra_disturbances or {})}
-    fdm = ac.fdm
-    freeze0 = fdm["propulsion/fuel_freeze"]
-    fdm["propulsion/fuel_freeze"] = 1  # the mass must not change from run to run (nor within one)
-    restore_trim(ac, ts)
-    u0 = dict(zip(CONTROL_INPUTS, ts.u_cmd))
-    writers: list[Callable[[float], None]] = []
-    gust_cols: list[int] = []
-    for j, name in enumerate(names):
-        if name in ("elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm"):
-            node = ac.node(f"fcs/{name.replace('_cmd_norm', '')}-cmd-norm")
-            writers.append(lambda v, node=node, base=u0[name]: node.set_double_value(base + v))
-        elif name == "throttle_cmd_norm":
-            nodes = [ac.node(f"fcs/throttle-cmd-norm[{i}]") for i in range(ac.n_engines)]
-
-            def wthr(v: float, nodes: list = nodes, base: float = u0[name]) -> None:
-                for n in nodes:
-                    n.set_double_value(base + v)
-            writers.append(wthr)
-        elif name in GUST_INPUTS:
-            gust_cols.append(j)
-            writers.append(lambda v: None)
-        elif name in extras and fdm.get_property_manager().hasNode(extras[name][0]):
-            node = ac.node(extras[name][0])
-            writers.append(lambda v, node=node, base=node.get_double_value(): node.set_double_value(base + v))
-        else:
-            raise DesignError(f"unknown input {name!r} for {ac.name}; known: "
-                              f"{', '.join(CONTROL_INPUTS + GUST_INPUTS + tuple(extras))}")
-    T_b2n = body_to_ned(*ts.x_body[6:9])
-    gust_nodes = [ac.node(p) for p in _GUST_PROPS]
-    gidx = [GUST_INPUTS.index(names[j]) for j in gust_cols]
-    read = ac.reader(output_names)
-    out = np.empty((du.shape[0], len(output_names)))
-    t = np.empty(du.shape[0])
-    g_b = np.zeros(3)
-    try:
-        for k in range(du.shape[0]):
-            row = du[k]
-            for j, w in enumerate(writers):
-                w(row[j])
-            if gust_cols:
-                g_b[:] = 0.0
-                for j, gi in zip(gust_cols, gidx):
-                    g_b[gi] = row[j]
-                for node, v in zip(gust_nodes, T_b2n @ g_b):
-                    node.set_double_value(v)
-            fdm.run()
-            out[k] = read()
-            t[k] = fdm.get_sim_time()
-    finally:
-        for node in gust_nodes:
-            node.set_double_value(0.0)
-        fdm["propulsion/fuel_freeze"] = freeze0
-    if "psi_rad" in output_names:
-        i = list(output_names).index("psi_rad")
-        out[:, i] = ts.x_body[_PSI] + np.unwrap(np.r_[0.0, [_wrap(v - ts.x_body[_PSI]) for v in out[:, i]]])[1:]
-    if not np.all(np.isfinite(out)):
-        k = int(np.argmax(~np.all(np.isfinite(out), axis=1)))
-        raise DesignError(f"{ac.name} at {ts.op.label()}: the nonlinear run produced NaN at t = {t[k]:.3f} s; "
-                          "reduce the doublet amplitude or move the point inside the envelope")
-    return NonlinearResponse(t_s=t, y=out, output_names=tuple(output_names))

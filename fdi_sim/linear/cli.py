@@ -10,12 +10,11 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from fdi_sim.errors import FdiSimError
-
-_KNOWN = ("f16", "DHC6")
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -45,9 +44,11 @@ def _fail(msg: str) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command; 0 on success, 2 on bad input."""
-    name = {k.lower(): k for k in _KNOWN}.get(str(args.aircraft).lower())
+    from fdi_sim.aircraft.model import AIRCRAFT  # here, not at import: every fdi-sim command builds this parser
+
+    name = {k.lower(): k for k in AIRCRAFT}.get(str(args.aircraft).lower())
     if name is None:
-        return _fail(f"unknown aircraft {args.aircraft!r}; known: {', '.join(_KNOWN)}.")
+        return _fail(f"unknown aircraft {args.aircraft!r}; known: {', '.join(AIRCRAFT)}.")
     if args.duration is not None and not args.duration > 0:
         return _fail(f"--duration {args.duration} must be positive (seconds of each validation run).")
     try:
@@ -57,8 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
         grid = resolve_grid(args.grid, name)
         if args.duration is not None:
-            grid = type(grid)(grid.aircraft, grid.points, grid.envelope, {**grid.validation, "duration_s": args.duration},
-                              grid.source)
+            grid = replace(grid, validation=replace(grid.validation, duration_s=args.duration))
         n = len(grid.points)
         print(f"linearizing {n} {name} points from {grid.source}", flush=True)
 

@@ -24,8 +24,12 @@ Several blocks let the speed range depend on the flap setting (the DHC-6 flies 1
 only at low speed). A command-line spec is one block: ``"h_ft=5000,10000;vt_kts=350:430:20"``
 (``start:stop:step`` includes ``stop``), checked against the aircraft's default envelope.
 
-The envelope needs Mach and calibrated airspeed of each point before any trim; they come
-from the 1976 standard atmosphere below (troposphere and lower stratosphere).
+The envelope needs Mach and calibrated airspeed of each point before any trim, and the model
+schedule needs calibrated airspeed for a point given by true airspeed; both come from the 1976
+standard atmosphere below (troposphere and lower stratosphere). It is written here rather than
+read from JSBSim because ``fdi_sim.linear`` does not import JSBSim (STYLE rule 2) and JSBSim's
+``FGAtmosphere`` exists only inside a loaded aircraft; ``test_grid.py`` checks it against the
+1976 tables and ``test_isa_calibrated_airspeed_matches_jsbsim`` against JSBSim's own air data.
 """
 from __future__ import annotations
 
@@ -37,8 +41,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from fdi_sim.errors import DesignError
+from fdi_sim.linear.validate import ValidationSettings
 from fdi_sim.operating_point import OperatingPoint
-from fdi_sim.units import FPS_PER_KT, KT_PER_FPS
+from fdi_sim.units import FPS_PER_KT, G0_FPS2, KT_PER_FPS
 
 #: folder of the per-aircraft data files
 AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
@@ -52,9 +57,8 @@ _T0_R = 518.67            # sea-level temperature [deg R]
 _P0_PSF = 2116.22         # sea-level pressure [lbf/ft^2]
 _LAPSE_R_PER_FT = 0.00356616
 _H_TROPO_FT = 36089.24
-_R_AIR = 1716.49          # gas constant of air [ft lbf / (slug deg R)]
-_GAMMA = 1.4
-_G0 = 32.174049
+_R_AIR_FTLBF_PER_SLUG_R = 1716.49  # gas constant of air [ft lbf / (slug deg R)]
+_GAMMA = 1.4              # ratio of specific heats of air [-]
 
 
 @dataclass(frozen=True)
@@ -86,12 +90,12 @@ def isa(h_ft: float) -> Atmosphere:
     if h_ft <= _H_TROPO_FT:
         T = _T0_R - _LAPSE_R_PER_FT * h_ft
         # p = p0 (T / T0)^(g / (R L))
-        p = _P0_PSF * (T / _T0_R) ** (_G0 / (_R_AIR * _LAPSE_R_PER_FT))
+        p = _P0_PSF * (T / _T0_R) ** (G0_FPS2 / (_R_AIR_FTLBF_PER_SLUG_R * _LAPSE_R_PER_FT))
     else:
         T = _T0_R - _LAPSE_R_PER_FT * _H_TROPO_FT
-        p11 = _P0_PSF * (T / _T0_R) ** (_G0 / (_R_AIR * _LAPSE_R_PER_FT))
-        p = p11 * math.exp(-_G0 * (h_ft - _H_TROPO_FT) / (_R_AIR * T))
-    return Atmosphere(T, p, p / (_R_AIR * T), math.sqrt(_GAMMA * _R_AIR * T))
+        p11 = _P0_PSF * (T / _T0_R) ** (G0_FPS2 / (_R_AIR_FTLBF_PER_SLUG_R * _LAPSE_R_PER_FT))
+        p = p11 * math.exp(-G0_FPS2 * (h_ft - _H_TROPO_FT) / (_R_AIR_FTLBF_PER_SLUG_R * T))
+    return Atmosphere(T, p, p / (_R_AIR_FTLBF_PER_SLUG_R * T), math.sqrt(_GAMMA * _R_AIR_FTLBF_PER_SLUG_R * T))
 
 
 def vc_from_vt(h_ft: float, vt_kts: float) -> tuple[float, float]:
@@ -160,8 +164,8 @@ class GridSpec:
         Every point, in file order (block by block; h, speed, flaps, eta nested).
     envelope : Envelope
         Limits every point was checked against.
-    validation : dict
-        ``duration_s``, ``width_s``, ``start_s`` and ``amplitudes`` (input -> amplitude).
+    validation : ValidationSettings
+        The doublets of the ``[validation]`` table.
     source : str
         File path or the command-line spec.
     """
@@ -169,7 +173,7 @@ class GridSpec:
     aircraft: str
     points: tuple[OperatingPoint, ...]
     envelope: Envelope
-    validation: dict[str, Any]
+    validation: ValidationSettings
     source: str
 
 
@@ -212,6 +216,28 @@ def _envelope(data: Mapping[str, Any], source: str) -> Envelope:
     return Envelope(limits=limits, why=why)
 
 
+def _number(key: str, v: Any, source: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise DesignError(f"{source}: {key} must be a number, got {v!r}")
+    return float(v)
+
+
+def _validation(data: Mapping[str, Any], source: str) -> ValidationSettings:
+    keys = ("amplitudes", "duration_s", "width_s", "start_s")
+    unknown = [k for k in data if k not in keys]
+    if unknown:
+        raise DesignError(f"{source}: unknown [validation] keys {unknown}; keys are {', '.join(keys)}")
+    amps = data.get("amplitudes", {})
+    if not isinstance(amps, Mapping):
+        raise DesignError(f"{source}: [validation.amplitudes] must be a table of input = amplitude")
+    times = {k: _number(f"validation.{k}", data[k], source) for k in keys[1:] if k in data}
+    for k, v in times.items():
+        if v < 0 or (v == 0 and k != "start_s"):
+            raise DesignError(f"{source}: validation.{k} = {v:g} s; give a positive time")
+    return ValidationSettings(amplitudes={k: _number(f"validation.amplitudes.{k}", v, source) for k, v in amps.items()},
+                              **times)
+
+
 def check_envelope(points: tuple[OperatingPoint, ...], envelope: Envelope, source: str) -> None:
     """Refuse points outside the envelope (one message listing all of them).
 
@@ -246,7 +272,7 @@ def grid_from_dict(data: Mapping[str, Any], source: str, aircraft: str | None = 
         points += _block_points(ac, b, source)
     env = _envelope(data.get("envelope", {}), source)
     check_envelope(tuple(points), env, source)
-    val = dict(data.get("validation", {}))
+    val = _validation(data.get("validation", {}), source)
     return GridSpec(aircraft=ac, points=tuple(points), envelope=env, validation=val, source=source)
 
 

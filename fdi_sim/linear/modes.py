@@ -116,6 +116,21 @@ class ModeTable:
                 out.append(m.eigenvalue.conjugate())
         return np.array(out)
 
+    def relative_errors(self, reference: NDArray[np.complex128]) -> NDArray[np.float64]:
+        """Per mode, the relative distance of its eigenvalue(s) to their partners in ``reference``.
+
+        The partners come from :func:`match_eigenvalues` over all eigenvalues; a pair scores
+        the worse of its two roots.
+
+        Returns
+        -------
+        NDArray
+            Shape ``(len(modes),)``, in :attr:`modes` order [-].
+        """
+        _, rel = match_eigenvalues(self.eigenvalues(), reference)
+        starts = np.cumsum([0] + [2 if m.is_pair else 1 for m in self.modes[:-1]])
+        return np.maximum.reduceat(rel, starts) if self.modes else np.zeros(0)
+
 
 def _is_pair(lam: complex) -> bool:
     return abs(lam.imag) > 1e-9 * max(1.0, abs(lam))

@@ -39,7 +39,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.errors import DesignError
+from fdi_sim.linear.grid import vc_from_vt
 from fdi_sim.linear.model import LinearModel
+from fdi_sim.linear.transform import DEFAULT_DT_S, discretize
 from fdi_sim.operating_point import OperatingPoint
 
 FORMAT = "fdi-sim-model-schedule"
@@ -48,6 +50,10 @@ VERSION = 1
 SCHEDULE_VARS: tuple[str, ...] = ("h_ft", "vc_kts", "flaps_deg", "icing_eta")
 #: smallest spacing used for each variable (a grid with one value on an axis uses this)
 _MIN_SPACING: dict[str, float] = {"h_ft": 1000.0, "vc_kts": 10.0, "flaps_deg": 10.0, "icing_eta": 0.05}
+#: lookups farther than this from every point are refused [grid spacings]
+MAX_DISTANCE: float = 1.5
+#: the stacked arrays of a schedule file
+ARRAYS: tuple[str, ...] = ("A", "B", "C", "D", "x0", "u0", "y0")
 
 
 @dataclass(frozen=True)
@@ -161,13 +167,9 @@ class ModelSchedule:
         self.meta = dict(meta or {})
         self._ok = [i for i, p in enumerate(self.points) if p.index >= 0]
         self._cache: dict[tuple[Any, ...], LinearModel] = {}
-        if self._ok:
-            X = np.array([[self.points[i].sched[k] for k in SCHEDULE_VARS] for i in self._ok])
-            self._X = X
-            self._spacing = np.array([max(_axis_spacing(X[:, j]), _MIN_SPACING[k]) for j, k in enumerate(SCHEDULE_VARS)])
-        else:
-            self._X = np.zeros((0, len(SCHEDULE_VARS)))
-            self._spacing = np.array([_MIN_SPACING[k] for k in SCHEDULE_VARS])
+        X = np.array([[self.points[i].sched[k] for k in SCHEDULE_VARS] for i in self._ok]).reshape(-1, len(SCHEDULE_VARS))
+        self._X = X
+        self._spacing = np.array([max(_axis_spacing(X[:, j]), _MIN_SPACING[k]) for j, k in enumerate(SCHEDULE_VARS)])
 
     # ------------------------------------------------------------------ access
     @property
@@ -183,7 +185,7 @@ class ModelSchedule:
         return self._model(self._blend([p.index], [1.0]), p.op)
 
     def _blend(self, rows: Sequence[int], w: Sequence[float]) -> dict[str, NDArray[np.float64]]:
-        return {k: sum(wi * self.arrays[k][r] for r, wi in zip(rows, w)) for k in ("A", "B", "C", "D", "x0", "u0", "y0")}
+        return {k: sum(wi * self.arrays[k][r] for r, wi in zip(rows, w)) for k in ARRAYS}
 
     def _model(self, m: Mapping[str, NDArray[np.float64]], op: OperatingPoint | None) -> LinearModel:
         return LinearModel(
@@ -196,8 +198,6 @@ class ModelSchedule:
     # ------------------------------------------------------------------ lookup
     def sched_of(self, op: OperatingPoint) -> NDArray[np.float64]:
         """Scheduling values (h_ft, vc_kts, flaps_deg, icing_eta) of an operating point."""
-        from fdi_sim.linear.grid import vc_from_vt
-
         vc = op.vc_kts if op.vc_kts is not None else vc_from_vt(op.h_ft, float(op.vt_kts))[0]  # type: ignore[arg-type]
         return np.array([op.h_ft, float(vc), op.flaps_deg, op.icing_eta])
 
@@ -205,8 +205,8 @@ class ModelSchedule:
         """Distance of scheduling values ``s`` to every point with a model [grid spacings]."""
         return np.sqrt(np.sum(((self._X - s) / self._spacing) ** 2, axis=1))
 
-    def model_at(self, op: OperatingPoint, dt_s: float = 1.0 / 120.0, method: str = "zoh",
-                 interpolate: bool = False, max_distance: float = 1.5) -> ScheduledModel:
+    def model_at(self, op: OperatingPoint, dt_s: float = DEFAULT_DT_S, method: str = "zoh",
+                 interpolate: bool = False, max_distance: float = MAX_DISTANCE) -> ScheduledModel:
         """The discrete-time model for ``op`` (nearest point, or interpolated).
 
         Parameters
@@ -216,7 +216,7 @@ class ModelSchedule:
         dt_s : float
             Detector sample time [s] (default 1/120 s, the simulation's rate).
         method : str
-            ``"zoh"`` or ``"euler"`` (see :func:`fdi_sim.linear.linearize.discretize`).
+            ``"zoh"`` or ``"euler"`` (see :func:`fdi_sim.linear.transform.discretize`).
         interpolate : bool
             Blend the enclosing triangle's models instead of taking the nearest.
         max_distance : float
@@ -233,15 +233,13 @@ class ModelSchedule:
         return self.lookup(self.sched_of(op), dt_s=dt_s, method=method, interpolate=interpolate,
                            max_distance=max_distance, op=op)
 
-    def lookup(self, s: Sequence[float], dt_s: float = 1.0 / 120.0, method: str = "zoh", interpolate: bool = False,
-               max_distance: float = 1.5, op: OperatingPoint | None = None) -> ScheduledModel:
+    def lookup(self, s: Sequence[float], dt_s: float = DEFAULT_DT_S, method: str = "zoh", interpolate: bool = False,
+               max_distance: float = MAX_DISTANCE, op: OperatingPoint | None = None) -> ScheduledModel:
         """:meth:`model_at` from raw scheduling values ``(h_ft, vc_kts, flaps_deg, icing_eta)``.
 
-        This is what a running simulation calls every step with its measured altitude and
-        calibrated airspeed.
+        A running simulation uses :class:`ScheduleTracker`, which calls this only when it
+        switches points.
         """
-        from fdi_sim.linear.linearize import discretize
-
         if not self._ok:
             raise DesignError(f"the {self.aircraft} schedule has no trimmed point; re-run `fdi-sim linearize`")
         s = np.asarray(s, dtype=float).reshape(len(SCHEDULE_VARS))
@@ -324,7 +322,7 @@ class ModelSchedule:
         try:
             with np.load(p, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
-                arrays = {k: z[k] for k in ("A", "B", "C", "D", "x0", "u0", "y0")}
+                arrays = {k: z[k] for k in ARRAYS}
         except FileNotFoundError:
             raise DesignError(f"schedule file {p} not found; create it with `fdi-sim linearize`") from None
         except (OSError, KeyError, ValueError, json.JSONDecodeError) as exc:
@@ -354,7 +352,9 @@ class ScheduleTracker:
     ``step(t_s, u, y)`` reads ``h_ft`` and ``vc_kts`` from the measurement ``y`` (in the
     schedule's output order) and returns the :class:`ScheduledModel` in use. A new point is
     taken only when it is nearer than the current one by ``hysteresis`` grid spacings, so
-    noise on the air data does not switch models back and forth.
+    noise on the air data does not switch models back and forth. Between switches a step
+    creates no objects: the distances go into preallocated buffers and the current model is
+    returned as it is.
 
     Parameters
     ----------
@@ -368,36 +368,53 @@ class ScheduleTracker:
         Discretization.
     hysteresis : float
         Switching margin [grid spacings].
+    max_distance : float
+        Refuse measurements farther than this from every point [grid spacings].
     """
 
     def __init__(self, schedule: ModelSchedule, flaps_deg: float = 0.0, icing_eta: float = 0.0,
-                 dt_s: float = 1.0 / 120.0, method: str = "zoh", hysteresis: float = 0.1) -> None:
-        self.schedule, self.flaps_deg, self.icing_eta = schedule, flaps_deg, icing_eta
-        self.dt_s, self.method, self.hysteresis = dt_s, method, hysteresis
-        outs = schedule.names["output_names"]
+                 dt_s: float = DEFAULT_DT_S, method: str = "zoh", hysteresis: float = 0.1,
+                 max_distance: float = MAX_DISTANCE) -> None:
+        self.schedule, self.dt_s, self.method = schedule, dt_s, method
+        self.hysteresis, self.max_distance = hysteresis, max_distance
+        outs = schedule.names.get("output_names", ())
         if "h_ft" not in outs or "vc_kts" not in outs:
             raise DesignError("ScheduleTracker needs h_ft and vc_kts among the schedule's outputs")
         self._ih, self._iv = outs.index("h_ft"), outs.index("vc_kts")
+        self._s = np.array([math.nan, math.nan, flaps_deg, icing_eta])
+        self._diff = np.empty_like(schedule._X)
+        self._d = np.empty(len(schedule._X))
+        self._cur = -1  # position of the current point among the schedule's points with a model
         self.current: ScheduledModel | None = None
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Forget the current point (no randomness is used)."""
-        self.current = None
+        self.current, self._cur = None, -1
 
     def step(self, t_s: float, u: NDArray[np.float64], y: NDArray[np.float64]) -> ScheduledModel:
-        """Pick the model for the measured operating point at time ``t_s`` [s]."""
-        s = np.array([y[self._ih], y[self._iv], self.flaps_deg, self.icing_eta])
-        if not np.all(np.isfinite(s)):
-            raise DesignError(f"t = {t_s:.3f} s: non-finite air data {s[:2]} for the schedule lookup")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            cand = self.schedule.lookup(s, self.dt_s, self.method)
-        if self.current is None:
-            self.current = cand
-        elif cand.indices != self.current.indices:
-            d = self.schedule.distances(s)
-            cur = self.schedule._ok.index(self.current.indices[0])
-            new = self.schedule._ok.index(cand.indices[0])
-            if d[new] + self.hysteresis < d[cur]:
-                self.current = cand
+        """Pick the model for the measured operating point at time ``t_s`` [s].
+
+        Raises
+        ------
+        DesignError
+            Non-finite air data, or a point beyond ``max_distance`` from the grid.
+        """
+        h_ft, vc_kts = y[self._ih], y[self._iv]
+        if not (math.isfinite(h_ft) and math.isfinite(vc_kts)):
+            raise DesignError(f"t = {t_s:.3f} s: non-finite air data h_ft = {h_ft}, vc_kts = {vc_kts} "
+                              "for the schedule lookup")
+        s, d, diff = self._s, self._d, self._diff
+        s[0], s[1] = h_ft, vc_kts
+        np.subtract(self.schedule._X, s, out=diff)  # d = |(X - s) / spacing| per point, as ModelSchedule.distances
+        np.divide(diff, self.schedule._spacing, out=diff)
+        np.square(diff, out=diff)
+        np.sqrt(np.sum(diff, axis=1, out=d), out=d)
+        near = int(np.argmin(d))
+        if d[near] > self.max_distance or self._cur < 0 or (near != self._cur and d[near] + self.hysteresis < d[self._cur]):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # the distance warning is for one-off lookups
+                # raises beyond max_distance, with the distance and the nearest point
+                self.current = self.schedule.lookup(s, self.dt_s, self.method, max_distance=self.max_distance)
+            self._cur = near
+        assert self.current is not None
         return self.current

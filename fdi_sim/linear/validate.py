@@ -19,13 +19,18 @@ derivatives of the previous one, then evaluates forces with the new input).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from functools import cached_property
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
+
+if TYPE_CHECKING:  # the JSBSim side, imported where it is flown
+    from fdi_sim.aircraft.linearize_state import TrimState
+    from fdi_sim.aircraft.model import Aircraft
 
 #: the bar of issue 4: normalized RMS error per output below 5 %
 NRMSE_BAR: float = 0.05
@@ -51,6 +56,28 @@ class DoubletSpec:
     amplitude: float
     start_s: float = 0.5
     width_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class ValidationSettings:
+    """The ``[validation]`` table of a grid file: one doublet per model input.
+
+    Attributes
+    ----------
+    amplitudes : dict
+        Input name -> doublet amplitude [units of the input].
+    duration_s : float
+        Length of each run [s].
+    width_s : float
+        Length of each half of a doublet [s].
+    start_s : float
+        Start of each doublet [s].
+    """
+
+    amplitudes: dict[str, float] = field(default_factory=dict)
+    duration_s: float = 10.0
+    width_s: float = DoubletSpec.width_s
+    start_s: float = DoubletSpec.start_s
 
 
 def doublet_signal(n_steps: int, dt_s: float, spec: DoubletSpec) -> NDArray[np.float64]:
@@ -103,61 +130,6 @@ def aggregate(nrmse_pair: NDArray[np.float64], rms_nl: NDArray[np.float64]) -> N
 
 
 @dataclass(frozen=True, eq=False)
-class ValidationResult:
-    """Linear against nonlinear doublet responses at one operating point.
-
-    Attributes
-    ----------
-    label : str
-        The operating point.
-    input_names : tuple of str
-        The input of each doublet run.
-    output_names : tuple of str
-        Output order.
-    dt_s, duration_s : float
-        Sample time and length of each run [s].
-    nrmse : NDArray
-        Per output, over all runs [-].
-    nrmse_pair : NDArray
-        Per run and output, shape (runs, outputs) [-].
-    rms_nl : NDArray
-        RMS of the nonlinear response per run and output [units of the output].
-    traces : dict
-        ``{"t_s", "y_nl", "y_lin", "du"}`` arrays when kept (for figures), else empty.
-    """
-
-    label: str
-    input_names: tuple[str, ...]
-    output_names: tuple[str, ...]
-    dt_s: float
-    duration_s: float
-    nrmse: NDArray[np.float64]
-    nrmse_pair: NDArray[np.float64]
-    rms_nl: NDArray[np.float64]
-    traces: dict[str, NDArray[np.float64]] = field(default_factory=dict)
-
-    @property
-    def worst(self) -> tuple[str, float]:
-        """The output with the largest aggregate error and that error."""
-        i = int(np.argmax(self.nrmse))
-        return self.output_names[i], float(self.nrmse[i])
-
-    def passed(self, bar: float = NRMSE_BAR) -> bool:
-        """Every output's aggregate error below ``bar``."""
-        return bool(np.all(self.nrmse < bar))
-
-    def nrmse_without(self, inputs: Sequence[str]) -> NDArray[np.float64]:
-        """Per-output aggregate error leaving out the runs on ``inputs`` [-]."""
-        keep = [i for i, n in enumerate(self.input_names) if n not in inputs]
-        return aggregate(self.nrmse_pair[keep], self.rms_nl[keep])
-
-    def excited_pairs(self, rel: float = 0.1) -> NDArray[np.bool_]:
-        """Runs that move an output by at least ``rel`` times its largest response over all runs."""
-        peak = np.max(self.rms_nl, axis=0, keepdims=True)
-        return self.rms_nl >= rel * np.where(peak > 0, peak, np.inf)
-
-
-@dataclass(frozen=True, eq=False)
 class DoubletRuns:
     """Nonlinear doublet responses from one trim (reusable for several linear models).
 
@@ -184,8 +156,65 @@ class DoubletRuns:
     output_names: tuple[str, ...]
     dt_s: float
 
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """The input of each run."""
+        return tuple(d.input_name for d in self.doublets)
 
-def compare(model_d: LinearModel, runs: DoubletRuns, keep_traces: bool = False) -> ValidationResult:
+    @property
+    def duration_s(self) -> float:
+        """Length of each run [s]."""
+        return self.dy.shape[1] * self.dt_s
+
+
+@dataclass(frozen=True, eq=False)
+class ValidationResult:
+    """Linear against nonlinear doublet responses at one operating point.
+
+    Attributes
+    ----------
+    runs : DoubletRuns
+        The nonlinear runs (operating point, inputs, outputs, step).
+    y_lin : NDArray
+        The discrete linear model's responses to the same inputs, shape (runs, N, p)
+        [units of the outputs].
+    """
+
+    runs: DoubletRuns
+    y_lin: NDArray[np.float64]
+
+    @cached_property
+    def nrmse(self) -> NDArray[np.float64]:
+        """Per output, over all runs [-]."""
+        return nrmse(self.y_lin, self.runs.dy, axis=(0, 1))
+
+    @cached_property
+    def nrmse_pair(self) -> NDArray[np.float64]:
+        """Per run and output, shape (runs, outputs) [-]."""
+        return nrmse(self.y_lin, self.runs.dy, axis=1)
+
+    @cached_property
+    def rms_nl(self) -> NDArray[np.float64]:
+        """RMS of the nonlinear response per run and output, shape (runs, outputs) [units of the output]."""
+        return np.sqrt(np.mean(self.runs.dy**2, axis=1))
+
+    @property
+    def worst(self) -> tuple[str, float]:
+        """The output with the largest aggregate error and that error."""
+        i = int(np.argmax(self.nrmse))
+        return self.runs.output_names[i], float(self.nrmse[i])
+
+    def passed(self, bar: float = NRMSE_BAR) -> bool:
+        """Every output's aggregate error below ``bar``."""
+        return bool(np.all(self.nrmse < bar))
+
+    def nrmse_without(self, inputs: Sequence[str]) -> NDArray[np.float64]:
+        """Per-output aggregate error leaving out the runs on ``inputs`` [-]."""
+        keep = [i for i, n in enumerate(self.runs.input_names) if n not in inputs]
+        return aggregate(self.nrmse_pair[keep], self.rms_nl[keep])
+
+
+def compare(model_d: LinearModel, runs: DoubletRuns) -> ValidationResult:
     """Score the discrete model ``model_d`` against nonlinear doublet runs (pure).
 
     Raises
@@ -198,80 +227,55 @@ def compare(model_d: LinearModel, runs: DoubletRuns, keep_traces: bool = False) 
     if tuple(model_d.output_names) != tuple(runs.output_names):
         raise DesignError(f"model outputs {model_d.output_names} differ from the runs' {runs.output_names}")
     y_lin = []
-    for spec, u in zip(runs.doublets, runs.du):
-        if spec.input_name not in model_d.input_names:
-            raise DesignError(f"doublet input {spec.input_name!r} is not a model input ({', '.join(model_d.input_names)})")
+    for name, u in zip(runs.input_names, runs.du):
+        if name not in model_d.input_names:
+            raise DesignError(f"doublet input {name!r} is not a model input ({', '.join(model_d.input_names)})")
         U = np.zeros((len(u), model_d.n_inputs))
-        U[:, model_d.input_names.index(spec.input_name)] = u
+        U[:, model_d.input_names.index(name)] = u
         y_lin.append(simulate_linear(model_d, U))
-    YL, YN = np.array(y_lin), runs.dy  # (runs, N, p)
-    traces = {}
-    if keep_traces:
-        traces = {"t_s": np.arange(1, YN.shape[1] + 1) * model_d.dt_s, "y_nl": YN, "y_lin": YL, "du": runs.du}
-    return ValidationResult(
-        label=runs.label, input_names=tuple(d.input_name for d in runs.doublets), output_names=model_d.output_names,
-        dt_s=model_d.dt_s, duration_s=YN.shape[1] * model_d.dt_s, nrmse=nrmse(YL, YN, axis=(0, 1)),
-        nrmse_pair=nrmse(YL, YN, axis=1), rms_nl=np.sqrt(np.mean(YN**2, axis=1)), traces=traces,
-    )
+    return ValidationResult(runs=runs, y_lin=np.array(y_lin))
 
 
-def default_doublets(model: LinearModel, amplitudes: Mapping[str, float], width_s: float = 1.0,
-                     start_s: float = 0.5) -> tuple[DoubletSpec, ...]:
-    """One doublet per model input that has an amplitude in ``amplitudes``.
+def default_doublets(model: LinearModel, settings: ValidationSettings) -> tuple[DoubletSpec, ...]:
+    """One doublet per model input, with the amplitude and timing of ``settings``.
 
     Raises
     ------
     DesignError
         A model input has no amplitude (every input must be validated).
     """
-    missing = [n for n in model.input_names if n not in amplitudes]
+    missing = [n for n in model.input_names if n not in settings.amplitudes]
     if missing:
         raise DesignError(f"no doublet amplitude for inputs {missing}; add them to the [validation] table")
-    return tuple(DoubletSpec(n, float(amplitudes[n]), start_s, width_s) for n in model.input_names)
+    return tuple(DoubletSpec(n, float(settings.amplitudes[n]), settings.start_s, settings.width_s)
+                 for n in model.input_names)
 
 
-def fly_doublets(ac: object, ts: object, doublets: Sequence[DoubletSpec], output_names: Sequence[str],
-                 duration_s: float = 10.0) -> DoubletRuns:
+def fly_doublets(ac: Aircraft, ts: TrimState, doublets: Sequence[DoubletSpec], output_names: Sequence[str],
+                 duration_s: float = ValidationSettings.duration_s) -> DoubletRuns:
     """Fly each doublet in JSBSim from the trim ``ts``; responses relative to an unforced run.
 
     Parameters
     ----------
     ac : fdi_sim.aircraft.Aircraft
         The aircraft (put back at the trim before every run; fuel frozen).
-    ts : fdi_sim.aircraft.linearize.TrimState
+    ts : fdi_sim.aircraft.linearize_state.TrimState
         The trim the model was linearized about.
     doublets : sequence of DoubletSpec
         One run per entry.
     output_names : sequence of str
-        Outputs to record.
+        Outputs to record (``psi_rad`` comes unwrapped about the trim heading, so its
+        deviation is continuous).
     duration_s : float
         Length of each run [s].
     """
-    from fdi_sim.aircraft.linearize import simulate_inputs  # JSBSim side
+    from fdi_sim.aircraft.linearize_response import simulate_inputs  # JSBSim side
 
-    dt = float(ac.dt_s)  # type: ignore[attr-defined]
-    n = int(round(duration_s / dt))
+    n = int(round(duration_s / ac.dt_s))
     names = tuple(output_names)
-    base = simulate_inputs(ac, ts, [], np.zeros((n, 0)), names).y  # type: ignore[arg-type]
-    wrap = [i for i, nm in enumerate(names) if nm == "psi_rad"]
-    us, dys = [], []
-    for spec in doublets:
-        u = doublet_signal(n, dt, spec)
-        r = simulate_inputs(ac, ts, [spec.input_name], u[:, None], names)  # type: ignore[arg-type]
-        dy = r.y - base
-        dy[:, wrap] = (dy[:, wrap] + np.pi) % (2 * np.pi) - np.pi
-        us.append(u)
-        dys.append(dy)
-    label = ts.op.label() if hasattr(ts, "op") else ""
-    return DoubletRuns(label=label, doublets=tuple(doublets), du=np.array(us), dy=np.array(dys),
-                       output_names=names, dt_s=dt)
-
-
-def validate_point(ac: object, ts: object, model_d: LinearModel, doublets: Sequence[DoubletSpec],
-                   duration_s: float = 10.0, keep_traces: bool = False) -> ValidationResult:
-    """:func:`fly_doublets` then :func:`compare` for one discrete model (at the simulation step)."""
-    if not model_d.is_discrete or abs(model_d.dt_s - ac.dt_s) > 1e-12:  # type: ignore[attr-defined]
-        raise DesignError(f"validation compares step by step: discretize the model at the simulation step "
-                          f"{ac.dt_s} s (got dt_s = {model_d.dt_s})")  # type: ignore[attr-defined]
-    runs = fly_doublets(ac, ts, doublets, model_d.output_names, duration_s)
-    return compare(model_d, runs, keep_traces=keep_traces)
+    base = simulate_inputs(ac, ts, [], np.zeros((n, 0)), names).y
+    us = np.array([doublet_signal(n, ac.dt_s, spec) for spec in doublets])
+    dy = np.array([simulate_inputs(ac, ts, [spec.input_name], u[:, None], names).y - base
+                   for spec, u in zip(doublets, us)])
+    return DoubletRuns(label=ts.op.label(), doublets=tuple(doublets), du=us, dy=dy, output_names=names,
+                       dt_s=float(ac.dt_s))

@@ -27,10 +27,9 @@ def pole_map(schedule: Any, path: str | Path, title: str | None = None) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    pts = schedule.ok_points
     from matplotlib.lines import Line2D
 
+    pts = schedule.ok_points
     fig, axes = plt.subplots(1, 2, figsize=(12, 5.2), layout="constrained")
     vc = np.array([p.sched["vc_kts"] for p in pts]) if pts else np.zeros(0)
     norm = plt.Normalize(vc.min(), vc.max()) if vc.size else None

@@ -58,7 +58,7 @@ def test_default_grids_meet_the_issue_sizes() -> None:
         assert len({p.vc_kts for p in dhc6.points if p.flaps_deg == f}) >= 5
     for g in (f16, dhc6):  # every model input has a doublet amplitude
         assert {"elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm", "throttle_cmd_norm",
-                "u_gust_body_fps", "v_gust_body_fps", "w_gust_body_fps"} <= set(g.validation["amplitudes"])
+                "u_gust_body_fps", "v_gust_body_fps", "w_gust_body_fps"} <= set(g.validation.amplitudes)
 
 
 def test_spec_ranges_and_icing_axis() -> None:
@@ -95,3 +95,22 @@ def test_bad_files_are_refused(tmp_path: Path) -> None:
     bad.write_text('aircraft = "f16"\n[[block]\n')
     with pytest.raises(DesignError, match="g.toml"):
         load_grid(bad)
+
+
+@pytest.mark.parametrize("table, match", [
+    ("[validation]\nduraton_s = 5.0\n", "unknown \\[validation\\] keys \\['duraton_s'\\]"),
+    ("[validation]\nduration_s = -1.0\n", "validation.duration_s = -1 s"),
+    ("[validation]\nwidth_s = 'long'\n", "validation.width_s must be a number"),
+    ("[validation.amplitudes]\nelevator_cmd_norm = [0.01, 0.02]\n", "validation.amplitudes.elevator_cmd_norm"),
+])
+def test_validation_table_is_strict(tmp_path: Path, table: str, match: str) -> None:
+    g = tmp_path / "g.toml"
+    g.write_text('aircraft = "f16"\n[[block]]\nh_ft = [10000]\nvt_kts = [400]\n' + table)
+    with pytest.raises(DesignError, match=match):
+        load_grid(g)
+
+
+def test_validation_defaults_and_values() -> None:
+    v = load_grid(default_grid_path("DHC6"), "DHC6").validation
+    assert (v.duration_s, v.width_s, v.start_s) == (10.0, 1.0, 0.5)
+    assert v.amplitudes["aileron_cmd_norm"] == 0.004

@@ -16,10 +16,9 @@ from scipy.signal import dlsim
 
 from fdi_sim.aircraft.linearize import BodyJacobians
 from fdi_sim.errors import DesignError
-from fdi_sim.linear.linearize import (
-    AERO_STATES, body_to_aero, discretize, drop_states, select, to_linear_model, uvw_to_aero_jacobian,
-)
+from fdi_sim.linear.linearize import AERO_STATES, body_to_aero, to_linear_model, uvw_to_aero_jacobian
 from fdi_sim.linear.model import LinearModel
+from fdi_sim.linear.transform import discretize, drop_states, select
 from fdi_sim.linear.validate import DoubletSpec, aggregate, doublet_signal, nrmse, simulate_linear
 
 BODY = ("u_body_fps", "v_body_fps", "w_body_fps", "p_radps", "q_radps", "r_radps", "phi_rad", "theta_rad", "psi_rad", "h_ft")

@@ -94,6 +94,20 @@ def test_match_eigenvalues_is_the_optimal_pairing() -> None:
     assert np.all(rel < 0.05)
 
 
+def test_relative_errors_per_mode() -> None:
+    """A pair scores the worse of its two roots against the reference; real roots score alone."""
+    mt = identify_modes(synthetic_aircraft(np.random.default_rng(15)), STATES)
+    lam = mt.eigenvalues()
+    ref = lam * (1 + 0.01 * np.arange(lam.size))  # a distinct relative error per eigenvalue
+    rel = mt.relative_errors(ref)
+    k = 0
+    for m, r in zip(mt.modes, rel):
+        n = 2 if m.is_pair else 1
+        expected = max(abs(lam[i] - ref[i]) / max(abs(ref[i]), 1e-3) for i in range(k, k + n))
+        assert r == pytest.approx(expected, rel=1e-12, abs=1e-15), m.name
+        k += n
+
+
 def test_bad_input() -> None:
     with pytest.raises(DesignError, match="state names"):
         identify_modes(np.eye(3), STATES)

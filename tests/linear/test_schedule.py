@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from fdi_sim.errors import DesignError
-from fdi_sim.linear.linearize import discretize
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.linear.schedule import ModelSchedule, SchedulePoint, ScheduleTracker
+from fdi_sim.linear.transform import discretize
 from fdi_sim.operating_point import OperatingPoint
 
 OUTS = ("q_radps", "nz_g", "vc_kts", "h_ft")
@@ -117,9 +117,12 @@ def test_tracker_follows_the_air_data_with_hysteresis() -> None:
     first = tr.step(0.0, np.zeros(2), y)
     assert s.points[first.indices[0]].sched["h_ft"] == 10000.0
     y[3] = 7600.0  # just past the midpoint to 5000 ft: within the hysteresis, keep the model
-    assert tr.step(0.01, np.zeros(2), y).indices == first.indices
+    assert tr.step(0.01, np.zeros(2), y) is first  # no new record between switches
     y[3] = 6000.0
     assert s.points[tr.step(0.02, np.zeros(2), y).indices[0]].sched["h_ft"] == 5000.0
+    y[3] = 40000.0
+    with pytest.raises(DesignError, match="beyond max_distance"):
+        tr.step(0.03, np.zeros(2), y)
     y[2] = np.nan
     with pytest.raises(DesignError, match="non-finite air data"):
-        tr.step(0.03, np.zeros(2), y)
+        tr.step(0.04, np.zeros(2), y)
