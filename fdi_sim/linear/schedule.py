@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.errors import DesignError
-from fdi_sim.linear.grid import vc_from_vt
+from fdi_sim.isa import vc_from_vt
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.linear.transform import DEFAULT_DT_S, discretize
 from fdi_sim.operating_point import OperatingPoint

@@ -49,6 +49,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from fdi_sim.isa import vt_from_vc
 from fdi_sim.pilot.maneuvers import AXES, HeadingChange, PulseTrain, RefRamp, Turn
 from fdi_sim.units import FPS_PER_KT, G0_FPS2, RAD_PER_DEG
 
@@ -57,21 +58,6 @@ BLOCK_STEPS = 120  # maneuver tables are evaluated one block of steps at a time
 #: measurements the autopilot flies on
 NEEDED = ("h_ft", "hdot_fps", "vc_kts", "theta_rad", "q_radps", "phi_rad", "p_radps", "psi_rad", "r_radps", "nx_g", "ny_g",
           "nz_g", "alpha_rad")
-
-# ISA sea level (troposphere) for the TAS/CAS ratio: speed of sound [ft/s], lapse factor [1/ft]
-_A0_FPS = 1116.45
-_ISA_K_PER_FT = 6.87559e-6
-
-
-def tas_fps(h_ft: float, vc_kts: float) -> float:
-    """True airspeed [ft/s] at pressure altitude ``h_ft`` [ft] for calibrated airspeed ``vc_kts`` (ISA, subsonic)."""
-    th = 1.0 - _ISA_K_PER_FT * min(h_ft, 36089.0)  # temperature ratio
-    delta = th**5.25588  # pressure ratio
-    vc = vc_kts * FPS_PER_KT / _A0_FPS
-    qc_p = ((1.0 + 0.2 * vc * vc) ** 3.5 - 1.0) / delta  # impact pressure / static pressure
-    mach = math.sqrt(5.0 * ((qc_p + 1.0) ** (2.0 / 7.0) - 1.0))
-    return mach * _A0_FPS * math.sqrt(th)
-
 
 @dataclass(frozen=True)
 class AutopilotGains:
@@ -248,7 +234,7 @@ class Pilot:
                     start = q.value_at(r.t_start_s, s, start)
             self._ramp_start.append(start)
         # energy scaling from the trim point: true airspeed V_0 [ft/s], TAS per kt of CAS [ft/s/kt]
-        self._v0_fps = tas_fps(trim.h_ft, trim.vc_kts)
+        self._v0_fps = vt_from_vc(trim.h_ft, trim.vc_kts)[0] * FPS_PER_KT
         self._fps_per_kcas = self._v0_fps / trim.vc_kts
         self._ke_s = self._v0_fps / G0_FPS2  # V_0 / g: kinetic energy height per ft/s of speed [s]
         self.reset()

@@ -8,9 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fdi_sim.errors import DesignError
-from fdi_sim.linear.grid import (
-    default_grid_path, isa, load_grid, parse_grid_spec, resolve_grid, vc_from_vt, vt_from_vc,
-)
+from fdi_sim.isa import isa, vc_from_vt, vt_from_vc
+from fdi_sim.linear.grid import default_grid_path, load_grid, parse_grid_spec, resolve_grid
 
 # U.S. Standard Atmosphere 1976 (English units table): h ft, T degR, p lbf/ft^2, rho slug/ft^3, a ft/s
 STD_ATM = [

@@ -14,7 +14,8 @@ from fdi_sim.aircraft.linearize import FDSettings, central_difference
 from fdi_sim.aircraft.linearize_fglin import fglinearization
 from fdi_sim.aircraft.linearize_state import capture_trim
 from fdi_sim.errors import DesignError
-from fdi_sim.linear.grid import default_grid_path, load_grid, parse_grid_spec, vc_from_vt
+from fdi_sim.isa import vc_from_vt
+from fdi_sim.linear.grid import default_grid_path, load_grid, parse_grid_spec
 from fdi_sim.linear.linearize import linearize, linearize_grid
 from fdi_sim.linear.modes import identify_modes, participation
 from fdi_sim.linear.transform import discretize
