@@ -20,12 +20,22 @@ from scipy.stats import binomtest  # noqa: E402
 from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_gains, run_sidar_example  # noqa: E402
 from fdi_sim.detectors.beard_jones import angle_rad, beard_jones_gain  # noqa: E402
 from fdi_sim.detectors.kalman import KalmanInnovationDetector, MultipleModelBank, simulate_discrete, steady_state_kalman  # noqa: E402
-from fdi_sim.detectors.lmi_filter import design_lmi_filter, sensitivity_max_sv, twin_otter_longitudinal_interim  # noqa: E402
+from fdi_sim.detectors.lmi_filter import design_lmi_filter, sensitivity_max_sv  # noqa: E402
+from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim  # noqa: E402
 
 OUT = Path(__file__).parent / "figures"
 DT = 1 / 120
 QD = np.diag([0.02, 2e-4, 1e-3, 1e-5]) ** 2
 RD = np.diag([0.1, 0.002, 0.002, 0.002]) ** 2
+
+
+def _save(fig: plt.Figure, name: str, legends: dict[plt.Axes, int]) -> None:
+    """Legends (axes -> font size), tight layout, write ``docs/figures/<name>`` and close."""
+    for ax, fontsize in legends.items():
+        ax.legend(fontsize=fontsize)
+    fig.tight_layout()
+    fig.savefig(OUT / name, dpi=110)
+    plt.close(fig)
 
 
 def _zoh_error(Acl: np.ndarray, f: np.ndarray, n_of_t, dt: float, steps: int) -> np.ndarray:
@@ -58,11 +68,7 @@ def fig_beard_jones() -> None:
     ax[0].plot([-0.2 * cf[0], 0.2 * cf[0]], [-0.2 * cf[1], 0.2 * cf[1]], "k:", label="C f")
     ax[0].set(xlabel="r1 = e2", ylabel="r2 = e3", title="residual path, fault n(t) = sin 3t + 0.5 cos 11t")
     ax[1].set(xlabel="t [s]", ylabel="angle(r, C f) [deg]", title="patent 3x3 example (eq. 2.47-2.54)")
-    ax[0].legend(fontsize=8)
-    ax[1].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(OUT / "observer_beard_jones.png", dpi=110)
-    plt.close(fig)
+    _save(fig, "observer_beard_jones.png", {ax[0]: 8, ax[1]: 8})
 
 
 def fig_lmi() -> dict[str, object]:
@@ -81,11 +87,7 @@ def fig_lmi() -> dict[str, object]:
     ax[0].set(xlabel="w [rad/s]", ylabel="max sv of V^-1/2 S(jw) V^1/2", title="Twin Otter (interim), elevator, h = 20 1/s")
     ax[1].axvline(-20.0, color="k", ls=":", label="-h")
     ax[1].set(xlabel="Re s [1/s]", ylabel="Im s [1/s]", title="closed-loop poles")
-    ax[0].legend(fontsize=8)
-    ax[1].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(OUT / "observer_lmi.png", dpi=110)
-    plt.close(fig)
+    _save(fig, "observer_lmi.png", {ax[0]: 8, ax[1]: 8})
     return res
 
 
@@ -108,11 +110,7 @@ def fig_sidar() -> None:
         ax[0].axhline(4e-3 if ex == 1 else 5e-2, color="k", ls=":", lw=1)
         ax[0].set(xlabel="t [s]", ylabel="|y - yh|", title=f"Sidar example {ex}{' tracking' if tracking else ''}: output error")
         ax[1].set(xlabel="t [s]", ylabel="parameter", title="estimates (dotted: truth)")
-        ax[0].legend(fontsize=8)
-        ax[1].legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(OUT / fname, dpi=110)
-        plt.close(fig)
+        _save(fig, fname, {ax[0]: 8, ax[1]: 7})
 
 
 def fig_far() -> dict[str, tuple[int, int]]:
@@ -159,10 +157,7 @@ def fig_far() -> dict[str, tuple[int, int]]:
     for j, nm in enumerate(obs.hypotheses):
         ax[1].plot(H[:, 0], H[:, j + 1], label=nm)
     ax[1].set(xlabel="t [s]", ylabel="relative change of adapted entry", title="Sidar estimates on the iced aircraft")
-    ax[1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(OUT / "observer_nis_far.png", dpi=110)
-    plt.close(fig)
+    _save(fig, "observer_nis_far.png", {ax[1]: 7})
     return counts
 
 
@@ -187,10 +182,7 @@ def fig_mmae() -> None:
     for j, nm in enumerate(bank.hypotheses):
         ax.plot(t, P[:, j], label=nm)
     ax.set(xlabel="t [s]", ylabel="hypothesis probability", title="multiple-model bank; ice grows 0 -> 0.2 over 20-40 s")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(OUT / "observer_mmae.png", dpi=110)
-    plt.close(fig)
+    _save(fig, "observer_mmae.png", {ax: 8})
 
 
 if __name__ == "__main__":

@@ -29,8 +29,8 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
+from fdi_sim.decision.chi2 import chi2_threshold
 from fdi_sim.detectors.base import Residual
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
@@ -300,21 +300,27 @@ class AdaptiveObserver:
         self._u0, self._y0 = np.asarray(model.u0), np.asarray(model.y0)
         self._x0 = np.zeros(n) if x0_hat is None else np.asarray(x0_hat, float).reshape(n)
         if S is not None:
-            if not 0 < alpha < 1:
-                raise DesignError(f"alpha must be in (0, 1), got {alpha}")
             self._Sinv = np.linalg.inv(np.asarray(S, float))
-            self.threshold = float(chi2.ppf(1 - alpha, m))
+            self.threshold = chi2_threshold(m, alpha)
             self._dof = m
         else:
             self._Sinv = np.eye(m)
             self.threshold = float(np.inf if threshold is None else threshold)
             self._dof = 0
         sn, inn = model.state_names, model.input_names
-        self._iA = np.flatnonzero(self.mask_A.ravel())
+        self._iA = np.flatnonzero(self.mask_A.ravel())  # adapted entries, flat indices
         self._iB = np.flatnonzero(self.mask_B.ravel())
+        self._rowA, self._colA = np.divmod(self._iA, n)
+        self._rowB, self._colB = np.divmod(self._iB, p)
         self.hypotheses: tuple[str, ...] = tuple(
-            [f"A[{sn[i // n]},{sn[i % n]}]" for i in self._iA] + [f"B[{sn[i // p]},{inn[i % p]}]" for i in self._iB]
+            [f"A[{sn[r]},{sn[c]}]" for r, c in zip(self._rowA, self._colA)]
+            + [f"B[{sn[r]},{inn[c]}]" for r, c in zip(self._rowB, self._colB)]
         )
+        # relative change of the adapted entries: (theta - nominal) / |nominal|; for a discrete model
+        # A0 - I is compared (= dt * continuous A to first order), so a diagonal change is not hidden by the 1
+        self._eye_A = np.eye(n).ravel()[self._iA] if model.is_discrete else np.zeros(self._iA.size)
+        self._nominal = np.concatenate([self._A_nom.ravel()[self._iA] - self._eye_A, self._B_nom.ravel()[self._iB]])
+        self._den = np.where(self._nominal != 0, np.abs(self._nominal), 1.0)
         self.reset()
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
@@ -358,8 +364,9 @@ class AdaptiveObserver:
             eps = dy - self._C @ self.x_hat - self._D @ du
             xh = self.x_hat
             self.x_hat = self.A0 @ xh + self.B0 @ du + self.K @ eps  # eq. 2, discrete
-            self.A0 = self.A0 + np.outer(self.M @ eps, xh) * self.mask_A  # eq. 23a
-            self.B0 = self.B0 + np.outer(self.N @ eps, du) * self.mask_B  # eq. 23b
+            # eq. 23 on the adapted entries only: A0[i, j] += (M eps)_i xh_j, B0[i, j] += (N eps)_i u_j
+            self.A0.flat[self._iA] += (self.M @ eps)[self._rowA] * xh[self._colA]
+            self.B0.flat[self._iB] += (self.N @ eps)[self._rowB] * du[self._colB]
         else:
             if self._prev is not None:
                 self._integrate(*self._prev, t_s, du, dy)
@@ -367,19 +374,20 @@ class AdaptiveObserver:
             eps = dy - self._C @ self.x_hat - self._D @ du
         self._t = float(t_s)
         stat = float(eps @ self._Sinv @ eps)
-        scores = self.estimates().relative_change
+        scores = self._relative_change()
         alarm = stat > self.threshold
         iso = self.hypotheses[int(np.argmax(np.abs(scores)))] if alarm and scores.size else None
         return Residual(float(t_s), eps, stat, self._dof, self.threshold, alarm, iso, scores)
 
+    def _relative_change(self) -> Array:
+        cur = np.concatenate([self.A0.ravel()[self._iA] - self._eye_A, self.B0.ravel()[self._iB]])
+        cur -= self._nominal
+        cur /= self._den
+        return cur
+
     def estimates(self) -> ParameterEstimates:
         """Current ``A0``, ``B0`` and the relative change of every adapted entry from nominal."""
-        # discrete: compare A0 - I (= dt * continuous A to first order), so a diagonal change is not hidden by the 1
-        eye = np.eye(self.A0.shape[0]) if self.model.is_discrete else 0.0
-        nom = np.concatenate([(self._A_nom - eye).ravel()[self._iA], self._B_nom.ravel()[self._iB]])
-        cur = np.concatenate([(self.A0 - eye).ravel()[self._iA], self.B0.ravel()[self._iB]])
-        den = np.where(nom != 0, np.abs(nom), 1.0)
-        return ParameterEstimates(self._t, self.A0.copy(), self.B0.copy(), (cur - nom) / den, self.hypotheses)
+        return ParameterEstimates(self._t, self.A0.copy(), self.B0.copy(), self._relative_change(), self.hypotheses)
 
 
 # ----------------------------------------------------------------------------- Sidar's examples (sec. VI)

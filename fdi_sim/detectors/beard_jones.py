@@ -16,27 +16,24 @@ Design, for each hypothesized direction ``f_i`` (seed ``002_d6038a6910cf5866.txt
    ``L = L_i + L_p (I - Cf (Cf)^+)`` (eq. 2.50).
 
 Several output-separable faults share one filter when their detection spaces are independent
-and no unassignable pole is unstable; otherwise :func:`plan_bank` splits them into a bank.
+and no unassignable pole is unstable; otherwise
+:func:`~fdi_sim.detectors.beard_jones_filter.plan_bank` splits them into a bank.
 
 The algebra holds for continuous (``dx/dt``) and discrete (``x(k+1)``) models alike; poles are
-given in the model's own domain. :func:`design_detection_filter` discretizes a continuous model
-(poles mapped ``z = exp(s dt)``, fault directions ``f -> int_0^dt e^(A t) dt f``).
+given in the model's own domain. This module is the design mathematics (pure functions); the
+runtime filter, the bank and the model-level design are in :mod:`fdi_sim.detectors.beard_jones_filter`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Callable, Sequence
 
+import control
 import numpy as np
-import scipy.linalg as sla
 from numpy.typing import NDArray
 from scipy.signal import place_poles
-from scipy.stats import chi2
 
-from fdi_sim.detectors.base import Residual
-from fdi_sim.detectors.kalman import observer_residual_covariance
 from fdi_sim.errors import DesignError
-from fdi_sim.linear.model import LinearModel
 
 Array = NDArray[np.float64]
 
@@ -48,50 +45,41 @@ class PoleCountError(DesignError):
         super().__init__(message)
         self.n_placeable = n_placeable
 
+
 # ----------------------------------------------------------------------------- linear algebra
 
 
+def _svd_tol(s: NDArray, rtol: float) -> float:
+    """Rank tolerance for singular values ``s`` (descending): relative ``rtol`` with an absolute floor 1e-12.
+
+    The floor is why scipy's ``null_space`` / ``orth`` (relative tolerance only) are not used: with one
+    output, ``C' = (I - Cf (Cf)^+) C`` is rounding noise (~1e-17) and must count as zero, not full rank.
+    """
+    return max(rtol * s[0], 1e-12) if s.size else 0.0
+
+
 def _rank(M: NDArray, rtol: float = 1e-9) -> int:
-    """Numerical rank by SVD, relative to the largest singular value (absolute floor 1e-12)."""
+    """Numerical rank by SVD (tolerance :func:`_svd_tol`)."""
     if M.size == 0:
         return 0
     s = np.linalg.svd(M, compute_uv=False)
-    return int(np.sum(s > max(rtol * (s[0] if s.size else 0.0), 1e-12)))
+    return int(np.sum(s > _svd_tol(s, rtol)))
 
 
 def null_basis(M: NDArray, rtol: float = 1e-9) -> Array:
-    """Orthonormal basis (columns) of the null space of ``M``, by SVD."""
-    n = M.shape[1]
+    """Orthonormal basis (columns) of the null space of ``M``, by SVD (tolerance :func:`_svd_tol`)."""
     if M.shape[0] == 0:
-        return np.eye(n)
+        return np.eye(M.shape[1])
     _, s, vt = np.linalg.svd(M)
-    r = int(np.sum(s > max(rtol * (s[0] if s.size else 0.0), 1e-12)))
-    return vt[r:].T.copy()
+    return vt[int(np.sum(s > _svd_tol(s, rtol))):].T.copy()
 
 
 def range_basis(M: NDArray, rtol: float = 1e-9) -> Array:
-    """Orthonormal basis (columns) of the range of ``M``, by SVD."""
+    """Orthonormal basis (columns) of the range of ``M``, by SVD (tolerance :func:`_svd_tol`)."""
     if M.size == 0:
         return np.zeros((M.shape[0], 0))
     u, s, _ = np.linalg.svd(M, full_matrices=False)
-    r = int(np.sum(s > max(rtol * s[0], 1e-12)))
-    return u[:, :r].copy()
-
-
-def observability_matrix(A: NDArray, C: NDArray) -> Array:
-    """``[C; CA; ...; CA^(n-1)]``."""
-    n = A.shape[0]
-    blocks, Ck = [], np.asarray(C, dtype=float)
-    for _ in range(n):
-        blocks.append(Ck)
-        Ck = Ck @ A
-    return np.vstack(blocks)
-
-
-def _pinv_col(c: Array) -> Array:
-    """Pseudo-inverse of a column (or full-column-rank) matrix: ``(c' c)^-1 c'`` (Lemma 2.1.5)."""
-    c2 = np.atleast_2d(c.T).T if c.ndim == 1 else c
-    return np.linalg.solve(c2.T @ c2, c2.T)
+    return u[:, : int(np.sum(s > _svd_tol(s, rtol)))].copy()
 
 
 def angle_rad(a: Array, b: Array) -> float:
@@ -111,9 +99,10 @@ def _is_stable(poles: NDArray, discrete: bool) -> bool:
 def check_observable(A: NDArray, C: NDArray, rtol: float = 1e-9) -> None:
     """Raise :class:`DesignError` if ``(A, C)`` is not observable (Lemma 2.1.3, condition 1)."""
     n = A.shape[0]
-    r = _rank(observability_matrix(A, C), rtol)
+    O = control.obsv(A, C)
+    r = _rank(O, rtol)
     if r < n:
-        unobs = null_basis(observability_matrix(A, C), rtol)
+        unobs = null_basis(O, rtol)
         raise DesignError(
             f"(A, C) is not observable: observability matrix rank {r} < n = {n}; unobservable direction "
             f"{np.round(unobs[:, 0], 4).tolist()}. Add a sensor that sees it, or remove that state from the model."
@@ -148,6 +137,17 @@ class OutputSeparability:
     dependent: tuple[tuple[int, ...], ...]
 
 
+def _first_visible_power(A: Array, C: Array, f: Array, rtol: float) -> tuple[int, Array]:
+    """``(mu, A^mu f)`` with ``mu`` the smallest ``j < n`` such that ``C A^j f != 0`` (eq. 2.15-2.16), or ``(-1, f)``."""
+    scale = max(np.linalg.norm(C, 2), 1e-300)
+    fj = f
+    for j in range(A.shape[0]):
+        if np.linalg.norm(C @ fj) > rtol * scale * max(np.linalg.norm(fj), 1e-300):
+            return j, fj
+        fj = A @ fj
+    return -1, f
+
+
 def output_separability(A: NDArray, C: NDArray, F: NDArray, rtol: float = 1e-9) -> OutputSeparability:
     """Check output separability of the columns of ``F`` (Lemma 2.1.2).
 
@@ -162,29 +162,20 @@ def output_separability(A: NDArray, C: NDArray, F: NDArray, rtol: float = 1e-9) 
     """
     A, C = np.asarray(A, float), np.asarray(C, float)
     F = np.asarray(F, float).reshape(A.shape[0], -1)
-    n = A.shape[0]
-    scale = max(np.linalg.norm(C, 2), 1e-300)
-    mus, dirs = [], []
-    for i in range(F.shape[1]):
-        f, mu = F[:, i], -1
-        fj = f.copy()
-        for j in range(n):
-            if np.linalg.norm(C @ fj) > rtol * scale * max(np.linalg.norm(fj), 1e-300):
-                mu = j
-                break
-            fj = A @ fj
-        mus.append(mu)
-        cf = C @ fj if mu >= 0 else np.zeros(C.shape[0])
-        nrm = np.linalg.norm(cf)
-        dirs.append(cf / nrm if nrm > 0 else cf)
-    D = np.array(dirs).T if dirs else np.zeros((C.shape[0], 0))
+    shifts = [_first_visible_power(A, C, F[:, i], rtol) for i in range(F.shape[1])]
+    mus = tuple(mu for mu, _ in shifts)
+    D = np.zeros((C.shape[0], F.shape[1]))
+    for i, (mu, fmu) in enumerate(shifts):
+        if mu >= 0:
+            cf = C @ fmu
+            D[:, i] = cf / np.linalg.norm(cf)
     dep: list[tuple[int, ...]] = []
     for i in range(D.shape[1]):
         if _rank(D[:, : i + 1], 1e-7) < _rank(D[:, :i], 1e-7) + 1:
             partners = tuple(j for j in range(i) if angle_rad(D[:, i], D[:, j]) < 1e-4) or tuple(range(i))
             dep.append((*partners, i))
     r = _rank(D, 1e-7)
-    return OutputSeparability(r == F.shape[1] and all(m >= 0 for m in mus), r, tuple(mus), D, tuple(dep))
+    return OutputSeparability(r == F.shape[1] and min(mus, default=0) >= 0, r, mus, D, tuple(dep))
 
 
 # ----------------------------------------------------------------------------- detection space
@@ -253,16 +244,14 @@ def detection_space(A: NDArray, C: NDArray, f: NDArray, name: str = "f", rtol: f
     f = np.asarray(f, float).reshape(-1)
     n = A.shape[0]
     check_observable(A, C, rtol)
-    sep = output_separability(A, C, f[:, None], rtol)
-    mu = sep.mu[0]
+    mu, fmu = _first_visible_power(A, C, f, rtol)
     if mu < 0:
         raise DesignError(f"fault {name!r}: C A^j f = 0 for every j < n; the fault is invisible at the outputs.")
-    fmu = np.linalg.matrix_power(A, mu) @ f
     cf = C @ fmu
-    cf_pinv = _pinv_col(cf[:, None])  # (Cf)^+ = ((Cf)'Cf)^-1 (Cf)'   (Lemma 2.1.5)
+    cf_pinv = cf[None, :] / (cf @ cf)  # (Cf)^+ = ((Cf)'Cf)^-1 (Cf)'   (Lemma 2.1.5)
     Cp = (np.eye(C.shape[0]) - cf[:, None] @ cf_pinv) @ C  # C' (eq. 2.34)
     Kp = A - (A @ fmu)[:, None] @ cf_pinv @ C  # K' (eq. 2.37)
-    M = observability_matrix(Kp, Cp)  # eq. 2.36
+    M = control.obsv(Kp, Cp)  # eq. 2.36
     D = null_basis(M, rtol)
     k = D.shape[1]
     if k == 0:
@@ -270,7 +259,7 @@ def detection_space(A: NDArray, C: NDArray, f: NDArray, name: str = "f", rtol: f
     completion = null_basis(D.T)
     # detection generator: g in D_f with C A^j g = 0, j < k-1 (eq. 2.11)
     if k > 1:
-        Z = null_basis(observability_matrix(A, C)[: C.shape[0] * (k - 1)] @ D, 1e-7)
+        Z = null_basis(control.obsv(A, C)[: C.shape[0] * (k - 1)] @ D, 1e-7)
         if Z.shape[1] != 1:
             raise DesignError(
                 f"fault {name!r}: detection space of order {k} has no unique generator ({Z.shape[1]} candidates); "
@@ -289,8 +278,7 @@ def detection_space(A: NDArray, C: NDArray, f: NDArray, name: str = "f", rtol: f
         )
     lead = alpha[k - mu - 1]  # alpha_(k-mu) in the patent's 1-based numbering (eq. 2.18)
     g, alpha = g * lead, alpha / lead
-    out = C @ np.linalg.matrix_power(A, mu) @ f
-    return DetectionSpace(f, D, completion, k, mu, g, alpha, out / np.linalg.norm(out))
+    return DetectionSpace(f, D, completion, k, mu, g, alpha, cf / np.linalg.norm(cf))
 
 
 # ----------------------------------------------------------------------------- gain
@@ -381,12 +369,39 @@ def _place(A: Array, B: Array, poles: NDArray, what: str) -> Array:
     return res.gain_matrix
 
 
+def _detection_part(A: Array, C: Array, sp: DetectionSpace, poles: NDArray, name: str) -> tuple[Array, Array]:
+    """``(c, v)`` with ``L c = v`` assigning ``poles`` on the detection space ``sp`` (eq. 2.23-2.24, 2.39).
+
+    With ``C D = c w'`` (rank one), the closed loop on ``D`` is ``Lambda = D'A D - kappa w'``; ``c`` is the
+    unit output direction and ``v = (A D - D Lambda) w / |w|^2``.
+    """
+    if poles.size != sp.order:
+        raise DesignError(f"fault {name!r} has detection order {sp.order}; give exactly {sp.order} detection pole(s), got {poles.size}")
+    D = sp.basis
+    u_, s_, vt_ = np.linalg.svd(C @ D, full_matrices=False)  # C D = c w' (rank one)
+    c, w = u_[:, 0], s_[0] * vt_[0]
+    # (I - D D') A D must be rank one along w': the detection space is (A, C)-invariant off w
+    off = A @ D - D @ (D.T @ A @ D)
+    if np.linalg.norm(off - np.outer(off @ w, w) / (w @ w)) > 1e-7 * max(1.0, np.linalg.norm(A)):
+        raise DesignError(f"fault {name!r}: detection space is not invariant off the output direction; rescale the model")
+    Lam0 = D.T @ A @ D
+    if sp.order == 1:
+        if abs(poles[0].imag) > 0:
+            raise DesignError(f"fault {name!r}: a detection order of 1 needs a real pole, got {poles[0]}")
+        Lam = np.array([[poles[0].real]])
+    else:
+        kappa = _place(Lam0.T, w[:, None], poles, f"detection ({name})").T
+        Lam = Lam0 - kappa @ w[None, :]
+    v = (A @ D - D @ Lam) @ w / (w @ w)  # L c = v   (eq. 2.39 with f -> D_f, eq. 2.24)
+    return c, v
+
+
 def beard_jones_gain(
     A: NDArray,
     C: NDArray,
     F: NDArray,
     detection_poles: Sequence[Sequence[complex] | complex],
-    completion_poles: Sequence[complex],
+    completion_poles: Sequence[complex] | Callable[[int], NDArray[np.complex128]],
     names: Sequence[str] | None = None,
     discrete: bool = False,
     allow_shift: bool = False,
@@ -412,8 +427,9 @@ def beard_jones_gain(
         Fault directions (columns).
     detection_poles : sequence
         Per fault, ``k_i`` poles (k_i = detection order; a scalar is accepted for k_i = 1).
-    completion_poles : sequence
-        The ``n - sum(k_i) - n_fixed`` remaining poles.
+    completion_poles : sequence, or callable ``count -> poles``
+        The ``n - sum(k_i) - n_fixed`` remaining poles; a callable is given that count (the
+        number of fixed poles is only known once the detection part is designed).
     names : sequence of str, optional
         Fault names (default ``f0, f1, ...``).
     discrete : bool
@@ -434,6 +450,8 @@ def beard_jones_gain(
     n, m = A.shape[0], C.shape[0]
     F = np.asarray(F, float).reshape(n, -1)
     r = F.shape[1]
+    if r == 0:
+        raise DesignError("no fault direction given: F needs at least one column")
     names = tuple(names) if names is not None else tuple(f"f{i}" for i in range(r))
     if len(names) != r:
         raise DesignError(f"{len(names)} names for {r} fault directions")
@@ -463,46 +481,19 @@ def beard_jones_gain(
             f"the detection spaces of {', '.join(names)} intersect (rank {_rank(Dall, 1e-7)} < {Dall.shape[1]}); "
             "they cannot be assigned in one filter: use a bank of filters (plan_bank)."
         )
-    det_poles: list[NDArray[np.complex128]] = []
-    cols_c, cols_v = [], []
-    for i, sp in enumerate(spaces):
-        p = np.atleast_1d(np.asarray(detection_poles[i], dtype=complex))
-        if p.size != sp.order:
-            raise DesignError(
-                f"fault {names[i]!r} has detection order {sp.order}; give exactly {sp.order} detection pole(s), got {p.size}"
-            )
-        D = sp.basis
-        u_, s_, vt_ = np.linalg.svd(C @ D, full_matrices=False)  # C D = c w' (rank one)
-        c, w = u_[:, 0], s_[0] * vt_[0]
-        Lam0 = D.T @ A @ D
-        # (I - D D') A D must be rank one along w': the detection space is (A, C)-invariant off w
-        off = (np.eye(n) - D @ D.T) @ A @ D
-        Pw = np.eye(sp.order) - np.outer(w, w) / (w @ w)
-        if np.linalg.norm(off @ Pw) > 1e-7 * max(1.0, np.linalg.norm(A)):
-            raise DesignError(f"fault {names[i]!r}: detection space is not invariant off the output direction; rescale the model")
-        if sp.order == 1:
-            Lam = np.array([[p[0].real]])
-            if abs(p[0].imag) > 0:
-                raise DesignError(f"fault {names[i]!r}: a detection order of 1 needs a real pole, got {p[0]}")
-        else:
-            kappa = _place(Lam0.T, w[:, None], p, f"detection ({names[i]})").T  # Lambda = Lam0 - kappa w'
-            Lam = Lam0 - kappa @ w[None, :]
-        v = (A @ D - D @ Lam) @ w / (w @ w)  # L c = v   (eq. 2.39 with f -> D_f, eq. 2.24)
-        cols_c.append(c)
-        cols_v.append(v)
-        det_poles.append(_sorted(p))
-    CF = np.column_stack(cols_c)
-    V = np.column_stack(cols_v)
+    det_poles = [np.atleast_1d(np.asarray(p, dtype=complex)) for p in detection_poles]
+    cols_c, cols_v = zip(*(_detection_part(A, C, sp, p, name) for sp, p, name in zip(spaces, det_poles, names)))
+    CF, V = np.column_stack(cols_c), np.column_stack(cols_v)
     CFp = np.linalg.pinv(CF)
     L0 = V @ CFp  # eq. 2.44 / 2.30 with E = 0
     Ai = A - L0 @ C  # eq. 2.46
     Proj = np.eye(m) - CF @ CFp
     Ci = Proj @ C  # eq. 2.45
-    U = null_basis(observability_matrix(Ai, Ci), rtol)  # unobservable subspace, contains every D_i
+    U = null_basis(control.obsv(Ai, Ci), rtol)  # unobservable subspace, contains every D_i
     O = null_basis(U.T) if U.shape[1] else np.eye(n)
     n_obs = O.shape[1]
     Vr = range_basis(Proj)  # orthonormal basis of the remaining output directions
-    comp = np.asarray(completion_poles, dtype=complex).reshape(-1)
+    comp = np.asarray(completion_poles(n_obs) if callable(completion_poles) else completion_poles, dtype=complex).reshape(-1)
     if comp.size != n_obs:
         raise PoleCountError(
             f"{comp.size} completion pole(s) given; this design can place exactly {n_obs} "
@@ -518,8 +509,7 @@ def beard_jones_gain(
     L = L0 + Lc
     Acl = A - L @ C
     poles = np.linalg.eigvals(Acl)
-    assigned = np.concatenate([*det_poles, comp]) if comp.size else np.concatenate(det_poles)
-    fixed = _remove_assigned(poles, assigned)
+    fixed = _remove_assigned(poles, np.concatenate([*det_poles, comp]))
     if fixed.size and not _is_stable(fixed, discrete):
         raise DesignError(
             f"faults {', '.join(names)} leave unassignable unstable pole(s) {np.round(fixed, 4).tolist()}; "
@@ -529,7 +519,8 @@ def beard_jones_gain(
     if err > 1e-5:
         raise DesignError(f"design check failed: residual direction error {err:.3g} rad (expected 0); rescale the model")
     return BeardJonesDesign(
-        L, Acl, _sorted(poles), names, F, spaces, CF, tuple(det_poles), _sorted(comp), _sorted(fixed), L0, Lc, discrete, err
+        L, Acl, _sorted(poles), names, F, spaces, CF, tuple(_sorted(p) for p in det_poles), _sorted(comp), _sorted(fixed),
+        L0, Lc, discrete, err,
     )
 
 
@@ -547,237 +538,3 @@ def _direction_error(Acl: Array, C: Array, spaces: Sequence[DetectionSpace], CF:
             X = Acl @ X
             X = X / max(np.linalg.norm(X), 1e-300)
     return worst
-
-
-# ----------------------------------------------------------------------------- runtime filter
-
-
-@dataclass(frozen=True)
-class DetectionFilterDesign:
-    """A discrete detection filter ready to run, from :func:`design_detection_filter`.
-
-    Attributes
-    ----------
-    model : LinearModel
-        The discrete model the filter runs on.
-    gain : BeardJonesDesign
-        The gain design (z-plane poles).
-    S : NDArray
-        (m, m) steady-state residual covariance for the given noise (identity if none given).
-    """
-
-    model: LinearModel
-    gain: BeardJonesDesign
-    S: Array
-
-
-def fault_directions_from_model(model: LinearModel, faults: Sequence[str] | Mapping[str, Sequence[float]]) -> tuple[tuple[str, ...], Array]:
-    """Fault directions of a model: input names give ``B[:, j]`` (actuator faults), a mapping gives columns.
-
-    Parameters
-    ----------
-    model : LinearModel
-    faults : sequence of input names, or mapping name -> (n,) direction in the model's state coordinates
-    """
-    n = model.n_states
-    if isinstance(faults, Mapping):
-        names = tuple(faults)
-        F = np.column_stack([np.asarray(faults[k], float).reshape(n) for k in names]) if names else np.zeros((n, 0))
-        return names, F
-    cols = []
-    for name in faults:
-        if name not in model.input_names:
-            raise DesignError(f"fault {name!r} is not an input of the model; inputs are {list(model.input_names)}")
-        cols.append(np.asarray(model.B)[:, model.input_names.index(name)])
-    return tuple(faults), (np.column_stack(cols) if cols else np.zeros((n, 0)))
-
-
-def _discretize_direction(A: Array, f: Array, dt_s: float) -> Array:
-    """``int_0^dt e^(A t) dt f``: how a constant fault of direction f enters a ZOH model."""
-    n = A.shape[0]
-    blk = np.zeros((n + 1, n + 1))
-    blk[:n, :n], blk[:n, n] = A * dt_s, f * dt_s
-    return sla.expm(blk)[:n, n]
-
-
-def spread_poles(base: complex, count: int, step: float = 0.15) -> NDArray[np.complex128]:
-    """``count`` distinct real poles ``base * (1 + step j)``, j = 0..count-1 (place_poles needs distinct poles)."""
-    return np.array([base * (1.0 + step * j) for j in range(count)], dtype=complex)
-
-
-def design_detection_filter(
-    model: LinearModel,
-    faults: Sequence[str] | Mapping[str, Sequence[float]],
-    detection_pole_radps: float = -4.0,
-    completion_pole_radps: float = -6.0,
-    dt_s: float | None = None,
-    Q: NDArray | None = None,
-    R: NDArray | None = None,
-    allow_shift: bool = False,
-) -> DetectionFilterDesign:
-    """Design a discrete detection filter for ``faults`` on ``model`` (one filter, all faults).
-
-    Continuous poles ``s`` are mapped to ``z = exp(s dt)``; detection poles are spread
-    (:func:`spread_poles`) over each detection order, completion poles over the rest.
-
-    Parameters
-    ----------
-    model : LinearModel
-        Continuous (needs ``dt_s``) or discrete.
-    faults : sequence or mapping
-        Input names (actuator faults, direction ``B[:, j]``) or name -> continuous-time direction.
-    detection_pole_radps, completion_pole_radps : float
-        Continuous-time pole locations [1/s], negative.
-    dt_s : float, optional
-        Sample time [s] for a continuous model.
-    Q : (n, n) array, optional
-        Discrete process-noise covariance per step (for the residual covariance ``S``).
-    R : (m, m) array, optional
-        Measurement-noise covariance.
-    allow_shift : bool
-        Passed to :func:`beard_jones_gain` (faults with ``C f = 0``).
-    """
-    if detection_pole_radps >= 0 or completion_pole_radps >= 0:
-        raise DesignError("detection_pole_radps and completion_pole_radps must be negative [1/s]")
-    names, Fc = fault_directions_from_model(model, faults)
-    if model.is_discrete:
-        dmodel, F = model, Fc
-        dt = model.dt_s
-    else:
-        if dt_s is None or dt_s <= 0:
-            raise DesignError("a continuous model needs dt_s > 0 to run as a discrete detection filter")
-        dmodel = model.discretize(dt_s)
-        F = np.column_stack([_discretize_direction(np.asarray(model.A), Fc[:, i], dt_s) for i in range(Fc.shape[1])])
-        dt = dt_s
-    A, C = np.asarray(dmodel.A), np.asarray(dmodel.C)
-    spaces = [detection_space(A, C, F[:, i], names[i]) for i in range(F.shape[1])]
-    det = [np.exp(spread_poles(detection_pole_radps * (1 + 0.05 * i), sp.order) * dt) for i, sp in enumerate(spaces)]
-    # count completion poles: try the full count, let the design report the exact number
-    n_comp = A.shape[0] - sum(sp.order for sp in spaces)
-    comp = np.exp(spread_poles(completion_pole_radps, n_comp) * dt)
-    try:
-        gain = beard_jones_gain(A, C, F, det, comp, names, discrete=True, allow_shift=allow_shift)
-    except PoleCountError as exc:
-        n_can = exc.n_placeable
-        gain = beard_jones_gain(
-            A, C, F, det, np.exp(spread_poles(completion_pole_radps, n_can) * dt), names, discrete=True, allow_shift=allow_shift
-        )
-    S = observer_residual_covariance(gain.A_cl, C, gain.L, Q, R)
-    return DetectionFilterDesign(dmodel, gain, S)
-
-
-class BeardJonesFilter:
-    """A running Beard-Jones detection filter (``reset(rng)`` / ``step(t_s, u, y)``).
-
-    ``r(k) = y(k) - C xh(k) - D u(k)``, ``xh(k+1) = A xh(k) + B u(k) + L r(k)`` (eq. 2.3-2.4 in
-    discrete form, deviations from trim). The statistic is ``r' S^-1 r`` against the chi-square
-    threshold at ``alpha``; isolation is by the angle between ``r`` and each output direction
-    ``C f_i`` (the patent's phi_e), both whitened by ``S^-1/2`` so mixed units weigh by their noise
-    (a linear map keeps a fixed direction fixed), accepted below ``max_angle_rad``.
-
-    Parameters
-    ----------
-    design : DetectionFilterDesign
-    alpha : float
-        Per-sample false-alarm probability of the chi-square threshold (Gaussian residual).
-    max_angle_rad : float
-        Largest residual angle [rad] accepted for isolation.
-    id : str
-        Registry id.
-    """
-
-    def __init__(self, design: DetectionFilterDesign, alpha: float = 1e-3, max_angle_rad: float = 0.35, id: str = "beard-jones-v1") -> None:
-        if not 0.0 < alpha < 1.0:
-            raise DesignError(f"alpha must be in (0, 1), got {alpha}")
-        self.design, self.alpha, self.max_angle_rad, self.id = design, alpha, max_angle_rad, id
-        self.hypotheses: tuple[str, ...] = design.gain.names
-        md = design.model
-        self._A, self._B, self._C, self._D = (np.asarray(M, float) for M in (md.A, md.B, md.C, md.D))
-        self._L = design.gain.L
-        self._u0, self._y0 = np.asarray(md.u0), np.asarray(md.y0)
-        self._Sinv = np.linalg.inv(design.S)
-        self._W = np.linalg.inv(np.linalg.cholesky(design.S))  # angles in whitened (S^-1/2) coordinates
-        self._dirs = self._W @ design.gain.output_directions
-        self.threshold = float(chi2.ppf(1.0 - alpha, md.n_outputs))
-        self._x = np.zeros(md.n_states)
-
-    def reset(self, rng: np.random.Generator | None = None) -> None:
-        """Zero the state estimate (the filter is deterministic; ``rng`` is unused)."""
-        self._x = np.zeros(self._A.shape[0])
-
-    def step(self, t_s: float, u: NDArray, y: NDArray) -> Residual:
-        """One sample: time [s], absolute inputs ``u`` and measurements ``y`` in model order."""
-        du = np.asarray(u, float) - self._u0
-        dy = np.asarray(y, float) - self._y0
-        r = dy - self._C @ self._x - self._D @ du  # r = y - C xh - D u
-        self._x = self._A @ self._x + self._B @ du + self._L @ r  # xh+ = A xh + B u + L r
-        stat = float(r @ self._Sinv @ r)
-        rw = self._W @ r
-        scores = np.array([angle_rad(rw, self._dirs[:, i]) for i in range(self._dirs.shape[1])])
-        alarm = stat > self.threshold
-        iso = None
-        if alarm and scores.size and np.nanmin(scores) < self.max_angle_rad:
-            iso = self.hypotheses[int(np.nanargmin(scores))]
-        return Residual(t_s, r, stat, self._C.shape[0], self.threshold, alarm, iso, scores)
-
-
-def plan_bank(
-    model: LinearModel,
-    faults: Sequence[str] | Mapping[str, Sequence[float]],
-    detection_pole_radps: float = -4.0,
-    completion_pole_radps: float = -6.0,
-    dt_s: float | None = None,
-    Q: NDArray | None = None,
-    R: NDArray | None = None,
-) -> list[DetectionFilterDesign]:
-    """Group faults greedily into as few filters as the theory allows.
-
-    A fault joins the first group with which one filter can still be designed (output separable,
-    independent detection spaces, stable unassignable poles); otherwise it starts a new group.
-    A fault that cannot be designed even alone raises its own :class:`DesignError`.
-    """
-    names, _ = fault_directions_from_model(model, faults)
-    sub = (lambda keys: {k: faults[k] for k in keys}) if isinstance(faults, Mapping) else (lambda keys: list(keys))
-    groups: list[list[str]] = []
-    designs: list[DetectionFilterDesign] = []
-    for name in names:
-        for gi, grp in enumerate(groups):
-            try:
-                d = design_detection_filter(model, sub([*grp, name]), detection_pole_radps, completion_pole_radps, dt_s, Q, R)
-            except DesignError:
-                continue
-            grp.append(name)
-            designs[gi] = d
-            break
-        else:
-            designs.append(design_detection_filter(model, sub([name]), detection_pole_radps, completion_pole_radps, dt_s, Q, R))
-            groups.append([name])
-    return designs
-
-
-class BeardJonesBank:
-    """A bank of Beard-Jones filters run side by side (faults that cannot share one filter).
-
-    The statistic is ``max_j stat_j / threshold_j`` against 1; scores are each hypothesis's angle
-    in its own filter; isolation comes from the filter with the largest normalized statistic.
-    """
-
-    def __init__(self, filters: Sequence[BeardJonesFilter], id: str = "beard-jones-bank-v1") -> None:
-        if not filters:
-            raise DesignError("a bank needs at least one filter")
-        self.filters, self.id = list(filters), id
-        self.hypotheses: tuple[str, ...] = tuple(h for f in self.filters for h in f.hypotheses)
-
-    def reset(self, rng: np.random.Generator | None = None) -> None:
-        """Reset every filter."""
-        for f in self.filters:
-            f.reset(rng)
-
-    def step(self, t_s: float, u: NDArray, y: NDArray) -> Residual:
-        """Step every filter on the same sample."""
-        res = [f.step(t_s, u, y) for f in self.filters]
-        ratios = np.array([r.statistic / r.threshold for r in res])
-        j = int(np.argmax(ratios))
-        scores = np.concatenate([r.scores for r in res if r.scores is not None])
-        alarm = bool(ratios[j] > 1.0)
-        return Residual(t_s, np.concatenate([r.r for r in res]), float(ratios[j]), 0, 1.0, alarm, res[j].isolation if alarm else None, scores)

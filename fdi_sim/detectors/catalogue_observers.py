@@ -15,8 +15,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_gains
-from fdi_sim.detectors.beard_jones import BeardJonesBank, BeardJonesFilter, plan_bank
-from fdi_sim.detectors.kalman import KalmanInnovationDetector, MultipleModelBank, TimeVaryingKalmanDetector, steady_state_kalman
+from fdi_sim.detectors.beard_jones_filter import BeardJonesBank, BeardJonesFilter, plan_bank
+from fdi_sim.detectors.kalman import KalmanDesign, KalmanInnovationDetector, MultipleModelBank, TimeVaryingKalmanDetector, steady_state_kalman
 from fdi_sim.detectors.lmi_filter import LmiDetectionFilter, design_lmi_filter
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
@@ -44,14 +44,29 @@ def _controls(model: LinearModel) -> list[str]:
     return [model.input_names[i] for i in model.control_columns()]
 
 
+def _noise(md: LinearModel, process_std: Any, sensor_std: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Diagonal process and sensor noise covariances per sample."""
+    return _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std")
+
+
+def _kalman(model: LinearModel, process_std: Any, sensor_std: Any, dt_s: float | None) -> KalmanDesign:
+    """Steady-state Kalman filter of ``model`` (discretized at ``dt_s`` if continuous) with diagonal noise."""
+    md = _discrete(model, dt_s)
+    return steady_state_kalman(md, *_noise(md, process_std, sensor_std))
+
+
 def make_beard_jones(model: LinearModel, faults: Sequence[str] | None = None, detection_pole_radps: float = -4.0,
                      completion_pole_radps: float = -6.0, dt_s: float | None = None, sensor_std: Any = None,
                      process_std: Any = None, alpha: float = 1e-3, max_angle_rad: float = 0.35) -> BeardJonesFilter | BeardJonesBank:
-    """Beard-Jones filter for actuator faults (default: every control input); a bank if they cannot share one."""
+    """Beard-Jones filter for actuator faults (default: every control input); a bank if they cannot share one.
+
+    Without ``process_std`` the residual covariance has no process noise (the filter's model is taken as exact).
+    """
     faults = list(faults) if faults is not None else _controls(model)
     R = _diag(sensor_std, model.n_outputs, "sensor_std")
     Q = _diag(process_std, model.n_states, "process_std") if process_std is not None else None
-    designs = plan_bank(model, faults, detection_pole_radps, completion_pole_radps, None if model.is_discrete else _dt(model, dt_s), Q, R)
+    designs = plan_bank(model, faults, detection_pole_radps=detection_pole_radps, completion_pole_radps=completion_pole_radps,
+                        dt_s=None if model.is_discrete else _dt(model, dt_s), Q=Q, R=R)
     filters = [BeardJonesFilter(d, alpha, max_angle_rad) for d in designs]
     return filters[0] if len(filters) == 1 else BeardJonesBank(filters)
 
@@ -71,16 +86,14 @@ def make_lmi_detection(model: LinearModel, fault: str | None = None, h_radps: fl
 def make_kalman(model: LinearModel, process_std: Any = None, sensor_std: Any = None, dt_s: float | None = None,
                 alpha: float = 1e-3, test: str = "nis", window_n: int = 200, n_lags: int = 5) -> KalmanInnovationDetector:
     """Steady-state Kalman filter with the NIS, bias or whiteness test."""
-    md = _discrete(model, dt_s)
-    design = steady_state_kalman(md, _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std"))
-    return KalmanInnovationDetector(design, alpha, test, window_n, n_lags, id="kalman-nis-v1")  # type: ignore[arg-type]
+    return KalmanInnovationDetector(_kalman(model, process_std, sensor_std, dt_s), alpha, test, window_n, n_lags)  # type: ignore[arg-type]
 
 
 def make_kalman_tv(model: LinearModel, process_std: Any = None, sensor_std: Any = None, dt_s: float | None = None,
                    alpha: float = 1e-3) -> TimeVaryingKalmanDetector:
     """Time-varying Kalman filter (covariance recursion) with the NIS test; ``set_model`` re-schedules it."""
     md = _discrete(model, dt_s)
-    return TimeVaryingKalmanDetector(md, _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std"), alpha=alpha)
+    return TimeVaryingKalmanDetector(md, *_noise(md, process_std, sensor_std), alpha=alpha)
 
 
 def make_mmae(model: LinearModel, alternatives: Mapping[str, LinearModel] | None = None, process_std: Any = None,
@@ -89,10 +102,7 @@ def make_mmae(model: LinearModel, alternatives: Mapping[str, LinearModel] | None
     if not alternatives:
         raise DesignError("kalman-mmae-v1 needs alternatives={'name': LinearModel, ...} besides the nominal model")
     models = {"nominal": model, **dict(alternatives)}
-    designs = []
-    for name, m in models.items():
-        md = _discrete(m, dt_s)
-        designs.append(steady_state_kalman(md, _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std")))
+    designs = [_kalman(m, process_std, sensor_std, dt_s) for m in models.values()]
     return MultipleModelBank(designs, list(models), 0, p_min, alarm_probability)
 
 
@@ -104,8 +114,8 @@ def make_adaptive_observer(model: LinearModel, adapt_A: Sequence[tuple[str, str]
 
     Default: the rows and columns of the measured states of ``A`` and the control columns of ``B``.
     """
-    md = _discrete(model, dt_s)
-    design = steady_state_kalman(md, _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std"))
+    design = _kalman(model, process_std, sensor_std, dt_s)
+    md = design.model
     sn, inn = list(md.state_names), list(md.input_names)
     mask_A = np.zeros((md.n_states, md.n_states), bool)
     mask_B = np.zeros((md.n_states, md.n_inputs), bool)

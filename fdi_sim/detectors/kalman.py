@@ -20,7 +20,6 @@ detecting icing (claims 18, 36).
 """
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
 from typing import Literal, Sequence
 
@@ -29,7 +28,9 @@ import scipy.linalg as sla
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from fdi_sim.decision.chi2 import chi2_threshold
 from fdi_sim.detectors.base import Residual
+from fdi_sim.detectors.directional_observer import DiscreteObserver
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
@@ -157,13 +158,6 @@ def nis(nu: NDArray, S: NDArray) -> float:
     return float(nu @ np.linalg.solve(S, nu))
 
 
-def chi2_threshold(dof: int, alpha: float) -> float:
-    """Upper ``1 - alpha`` quantile of chi-square with ``dof`` degrees of freedom."""
-    if not 0 < alpha < 1 or dof < 1:
-        raise DesignError(f"need dof >= 1 and 0 < alpha < 1, got dof={dof}, alpha={alpha}")
-    return float(chi2.ppf(1.0 - alpha, dof))
-
-
 @dataclass(frozen=True)
 class WindowTest:
     """A windowed innovation test.
@@ -185,10 +179,31 @@ class WindowTest:
     reject: bool
 
 
-def _whiten(nu_window: NDArray, S: NDArray) -> Array:
-    Z = np.atleast_2d(np.asarray(nu_window, float))
-    Li = np.linalg.inv(np.linalg.cholesky(S))
-    return Z @ Li.T  # z = L^-1 nu, cov I
+def _whitener(S: NDArray) -> Array:
+    """``W = L^-1`` with ``S = L L'``: ``z = W nu`` has identity covariance."""
+    return np.linalg.inv(np.linalg.cholesky(S))
+
+
+def _bias_statistic(Z: Array) -> float:
+    """``N zbar' zbar`` of whitened innovations ``Z`` (N, m) (Sidar eq. 10a)."""
+    zbar = Z.mean(axis=0)
+    return float(Z.shape[0] * zbar @ zbar)
+
+
+def _whiteness_statistic(Z: Array, n_lags: int) -> float:
+    """``N sum_{j=1..L} |R_z(j)|_F^2``, ``R_z(j) = (1/N) sum_k z(k) z(k-j)'`` of whitened ``Z`` (N, m) (eq. 10b)."""
+    N = Z.shape[0]
+    return float(sum(np.sum((Z[j:].T @ Z[:-j]) ** 2) for j in range(1, n_lags + 1)) / N)
+
+
+def _window_test(stat: float, dof: int, alpha: float) -> WindowTest:
+    thr = chi2_threshold(dof, alpha)
+    return WindowTest(stat, dof, thr, float(chi2.sf(stat, dof)), stat > thr)
+
+
+def _check_lags(n_lags: int, window_n: int) -> None:
+    if not 1 <= n_lags < window_n:
+        raise DesignError(f"n_lags must be in [1, {window_n - 1}] for a window of {window_n}, got {n_lags}")
 
 
 def bias_test(nu_window: NDArray, S: NDArray, alpha: float) -> WindowTest:
@@ -203,11 +218,8 @@ def bias_test(nu_window: NDArray, S: NDArray, alpha: float) -> WindowTest:
     alpha : float
         False-alarm probability of the test.
     """
-    Z = _whiten(nu_window, S)
-    N, m = Z.shape
-    zbar = Z.mean(axis=0)
-    stat = float(N * zbar @ zbar)
-    return WindowTest(stat, m, chi2_threshold(m, alpha), float(chi2.sf(stat, m)), stat > chi2_threshold(m, alpha))
+    Z = np.atleast_2d(np.asarray(nu_window, float)) @ _whitener(S).T
+    return _window_test(_bias_statistic(Z), Z.shape[1], alpha)
 
 
 def whiteness_test(nu_window: NDArray, S: NDArray, n_lags: int, alpha: float) -> WindowTest:
@@ -216,18 +228,10 @@ def whiteness_test(nu_window: NDArray, S: NDArray, n_lags: int, alpha: float) ->
     ``R_z(j) = (1/N) sum_k z(k) z(k-j)'`` with ``z = S^-1/2 nu`` (known covariance, so no mean or
     variance is estimated; a bias also shows here).
     """
-    Z = _whiten(nu_window, S)
+    Z = np.atleast_2d(np.asarray(nu_window, float)) @ _whitener(S).T
     N, m = Z.shape
-    if not 1 <= n_lags < N:
-        raise DesignError(f"n_lags must be in [1, {N - 1}], got {n_lags}")
-    stat = 0.0
-    for j in range(1, n_lags + 1):
-        R = Z[j:].T @ Z[:-j] / N
-        stat += float(np.sum(R * R))
-    stat *= N
-    dof = m * m * n_lags
-    thr = chi2_threshold(dof, alpha)
-    return WindowTest(stat, dof, thr, float(chi2.sf(stat, dof)), stat > thr)
+    _check_lags(n_lags, N)
+    return _window_test(_whiteness_statistic(Z, n_lags), m * m * n_lags, alpha)
 
 
 # ----------------------------------------------------------------------------- detectors
@@ -235,6 +239,10 @@ def whiteness_test(nu_window: NDArray, S: NDArray, n_lags: int, alpha: float) ->
 
 class KalmanInnovationDetector:
     """Steady-state Kalman filter with an innovation test (``reset(rng)`` / ``step(t_s, u, y)``).
+
+    The filter runs in predictor form ``xh(k+1) = A xh + B u + A K nu``
+    (:class:`~fdi_sim.detectors.directional_observer.DiscreteObserver`); the whitened innovations
+    ``z = S^-1/2 nu`` of the last ``window_n`` samples are kept in a preallocated ring buffer.
 
     Parameters
     ----------
@@ -253,48 +261,60 @@ class KalmanInnovationDetector:
                  window_n: int = 200, n_lags: int = 5, id: str = "kalman-nis-v1") -> None:
         if test not in ("nis", "bias", "whiteness"):
             raise DesignError(f"test must be 'nis', 'bias' or 'whiteness', got {test!r}")
+        _check_lags(n_lags, window_n)
         self.design, self.alpha, self.test, self.window_n, self.n_lags, self.id = design, alpha, test, window_n, n_lags, id
         self.hypotheses: tuple[str, ...] = ()
         md = design.model
-        self._A, self._B, self._C, self._D = (np.asarray(X, float) for X in (md.A, md.B, md.C, md.D))
-        self._u0, self._y0 = np.asarray(md.u0), np.asarray(md.y0)
-        self._K, self._S = design.K, design.S
-        self._Sinv = np.linalg.inv(design.S)
+        self._observer = DiscreteObserver.from_gain(md.A, md.B, md.C, md.D, design.predictor_gain, md.u0, md.y0)
+        self._W = _whitener(design.S)
         m = md.n_outputs
         self._dof = m if test != "whiteness" else m * m * n_lags
         self.threshold = chi2_threshold(self._dof, alpha)
+        # every z is stored at k % N and k % N + N, so the last N samples are always one contiguous slice
+        self._z2 = np.zeros((2 * window_n, m))
         self.reset()
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Zero estimate and empty window (deterministic; ``rng`` unused)."""
-        self._x = np.zeros(self._A.shape[0])
-        self._win: deque[Array] = deque(maxlen=self.window_n)
+        self._observer.reset()
+        self._n_seen = 0
+        self.innovation = np.zeros(self._observer.n_outputs)
+
+    def innovate(self, u: NDArray, y: NDArray) -> float:
+        """Filter one sample; keep the innovation (``self.innovation``) and return its NIS ``nu' S^-1 nu``."""
+        nu = self._observer.residual(u, y, np.empty(self._observer.n_outputs))
+        self.innovation = nu
+        i = self._n_seen % self.window_n
+        z = np.dot(self._W, nu, out=self._z2[i])
+        self._z2[i + self.window_n] = z
+        self._n_seen += 1
+        return float(z @ z)
+
+    def _window(self) -> Array | None:
+        """The whitened innovations of the last ``window_n`` samples, oldest first (a view), or None."""
+        if self._n_seen < self.window_n:
+            return None
+        i = (self._n_seen - 1) % self.window_n
+        return self._z2[i + 1:i + 1 + self.window_n]
 
     def step(self, t_s: float, u: NDArray, y: NDArray) -> Residual:
         """One sample: time [s], absolute ``u``, ``y``."""
-        du = np.asarray(u, float) - self._u0
-        dy = np.asarray(y, float) - self._y0
-        nu = dy - self._C @ self._x - self._D @ du  # innovation
-        xu = self._x + self._K @ nu  # update
-        self._x = self._A @ xu + self._B @ du  # predict
-        self._win.append(nu)
-        if self.test == "nis":
-            stat, valid = float(nu @ self._Sinv @ nu), True
-        else:
-            valid = len(self._win) == self.window_n
-            stat = 0.0
-            if valid:
-                W = np.array(self._win)
-                res = bias_test(W, self._S, self.alpha) if self.test == "bias" else whiteness_test(W, self._S, self.n_lags, self.alpha)
-                stat = res.statistic
-        return Residual(float(t_s), nu, stat, self._dof, self.threshold, bool(valid and stat > self.threshold), None, None, valid)
+        stat = self.innovate(u, y)
+        valid = True
+        if self.test != "nis":
+            Z = self._window()
+            valid = Z is not None
+            stat = 0.0 if Z is None else _bias_statistic(Z) if self.test == "bias" else _whiteness_statistic(Z, self.n_lags)
+        return Residual(float(t_s), self.innovation, stat, self._dof, self.threshold, valid and stat > self.threshold, None, None, valid)
 
     def window_tests(self) -> tuple[WindowTest, WindowTest] | None:
         """Bias and whiteness tests on the current window, or None until it is full."""
-        if len(self._win) < self.window_n:
+        Z = self._window()
+        if Z is None:
             return None
-        W = np.array(self._win)
-        return bias_test(W, self._S, self.alpha), whiteness_test(W, self._S, self.n_lags, self.alpha)
+        m = Z.shape[1]
+        return (_window_test(_bias_statistic(Z), m, self.alpha),
+                _window_test(_whiteness_statistic(Z, self.n_lags), m * m * self.n_lags, self.alpha))
 
 
 class TimeVaryingKalmanDetector:
@@ -324,6 +344,7 @@ class TimeVaryingKalmanDetector:
         self.Qd, self.Rd = np.asarray(Qd, float), np.asarray(Rd, float)
         n = model.n_states
         self._P0 = (100.0 * self.Qd + 1e-6 * np.eye(n)) if P0 is None else np.asarray(P0, float)
+        self._I = np.eye(n)
         self.set_model(model)
         self.threshold = chi2_threshold(model.n_outputs, alpha)
         self.reset()
@@ -331,8 +352,8 @@ class TimeVaryingKalmanDetector:
     def set_model(self, model: LinearModel) -> None:
         """Use another discrete model from the next step on (same state and signal dimensions)."""
         self.model = model
-        self._A, self._B, self._C, self._D = (np.asarray(X, float) for X in (model.A, model.B, model.C, model.D))
-        self._u0, self._y0 = np.asarray(model.u0), np.asarray(model.y0)
+        self._A, self._B, self._C, self._D = model.A, model.B, model.C, model.D
+        self._u0, self._y0 = model.u0, model.y0
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Zero estimate, initial covariance."""
@@ -342,13 +363,12 @@ class TimeVaryingKalmanDetector:
 
     def step(self, t_s: float, u: NDArray, y: NDArray) -> Residual:
         """One sample: time [s], absolute ``u``, ``y``."""
-        du = np.asarray(u, float) - self._u0
-        dy = np.asarray(y, float) - self._y0
+        du = np.subtract(u, self._u0)
         C, P, R = self._C, self.P, self.Rd
-        nu = dy - C @ self._x - self._D @ du
+        nu = np.subtract(y, self._y0) - C @ self._x - self._D @ du
         S = C @ P @ C.T + R  # S = C P C' + R
         K = np.linalg.solve(S, C @ P).T  # K = P C' S^-1
-        I_KC = np.eye(P.shape[0]) - K @ C
+        I_KC = self._I - K @ C
         Pu = I_KC @ P @ I_KC.T + K @ R @ K.T  # Joseph form
         self._x = self._A @ (self._x + K @ nu) + self._B @ du
         self.P = self._A @ Pu @ self._A.T + self.Qd
@@ -391,6 +411,8 @@ class MultipleModelBank:
         self.filters = [KalmanInnovationDetector(d, test="nis") for d in designs]
         self._logdet = np.array([np.linalg.slogdet(2 * np.pi * d.S)[1] for d in designs])
         self._prior = np.full(len(designs), 1.0 / len(designs)) if prior is None else np.asarray(prior, float) / np.sum(prior)
+        self._others = np.array([i for i in range(len(designs)) if i != nominal])
+        self._nis = np.empty(len(designs))
         self.reset()
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
@@ -401,20 +423,20 @@ class MultipleModelBank:
 
     def step(self, t_s: float, u: NDArray, y: NDArray) -> Residual:
         """Step every filter; Bayes update of the model probabilities."""
-        res = [f.step(t_s, u, y) for f in self.filters]
-        loglik = np.array([-0.5 * (r.statistic + ld) for r, ld in zip(res, self._logdet)])  # log N(nu; 0, S)
-        logp = np.log(self.probabilities) + loglik
+        for i, f in enumerate(self.filters):
+            self._nis[i] = f.innovate(u, y)
+        logp = np.log(self.probabilities) - 0.5 * (self._nis + self._logdet)  # + log N(nu; 0, S)
         p = np.exp(logp - np.max(logp))
         p /= p.sum()
-        p = np.maximum(p, self.p_min)
-        self.probabilities = p / p.sum()
-        best = int(np.argmax(self.probabilities))
-        others = [i for i in range(len(res)) if i != self.nominal]
-        j = max(others, key=lambda i: self.probabilities[i])
-        stat = float(self.probabilities[j])
+        np.maximum(p, self.p_min, out=p)
+        p /= p.sum()
+        self.probabilities = p  # a new array every step: the record below may keep it
+        best = int(np.argmax(p))
+        j = int(self._others[np.argmax(p[self._others])])
+        stat = float(p[j])
         alarm = stat > self.threshold
-        return Residual(float(t_s), res[best].r, stat, 0, self.threshold, alarm, self.hypotheses[j] if alarm else None,
-                        self.probabilities.copy())
+        return Residual(float(t_s), self.filters[best].innovation, stat, 0, self.threshold, alarm,
+                        self.hypotheses[j] if alarm else None, p)
 
 
 # ----------------------------------------------------------------------------- simulation helper

@@ -22,7 +22,8 @@ poles inside ``-h <= Re s < 0``, alignment residual ``<= sqrt(eps)``, the sensit
 raises :class:`~fdi_sim.errors.DesignError`; a gain is never returned silently wrong.
 
 The runtime :class:`LmiDetectionFilter` discretizes the continuous observer (zero-order hold on
-``u`` and ``y``) at the detector rate.
+``u`` and ``y``) at the detector rate and runs it as a
+:class:`~fdi_sim.detectors.directional_observer.DirectionalObserver`.
 """
 from __future__ import annotations
 
@@ -34,73 +35,15 @@ from typing import Literal
 import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
-from fdi_sim.detectors.base import Residual
-from fdi_sim.detectors.beard_jones import angle_rad, check_observable, detection_space, fault_directions_from_model
+from fdi_sim.detectors.beard_jones import angle_rad, check_observable, detection_space
+from fdi_sim.detectors.beard_jones_filter import fault_directions_from_model
+from fdi_sim.detectors.directional_observer import DirectionalObserver, DiscreteObserver
+from fdi_sim.detectors.kalman import observer_residual_covariance
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
 Array = NDArray[np.float64]
-
-# ----------------------------------------------------------------------------- interim aircraft model
-
-#: AllIce k factors (per unit eta) of the UIUC Twin Otter files (JSBSIM_NOTES.md sec. 5.2).
-_K_ICE = {"CZ_a": -1.48148, "CZ_q": -0.20741, "CZ_de": -1.40741, "Cm_a": -1.46667, "Cm_q": -0.51852, "Cm_de": -1.48148, "CXo": 6.52696}
-
-
-def twin_otter_longitudinal_interim(icing_eta: float = 0.0) -> LinearModel:
-    """INTERIM 4-state longitudinal DHC-6 Twin Otter, 5000 ft, 120 KIAS (218 ft/s), flaps 0.
-
-    **To be replaced by the project linearizer's model** (``fdi_sim.linear``) as soon as it exists;
-    every design in this module takes the model as an argument.
-
-    States ``[vt_fps, alpha_rad, q_radps, theta_rad]``, inputs ``[elevator_cmd_norm,
-    throttle_cmd_norm]``, outputs = states (``C = I``), continuous time. Measured JSBSim values
-    (JSBSIM_NOTES.md sec. 4.3): ``Zw = -1.22 1/s``, ``M_alpha = -8.8 1/s^2``, ``Mq = -3.29 1/s``,
-    ``M_de = -1.99 rad/s^2`` per unit command. Filled in (stated assumptions): m = 330 slug,
-    S = 420 ft^2, cbar = 6.5 ft, rho = 0.002048 slug/ft^3 (q = 48.7 psf); ``Zq/V = -0.0846`` from
-    ``CLq = 19.97``; ``X_alpha = (qS/m)(CL - CD_alpha) = 17.68 ft/s^2`` (CL = 0.519, CD_alpha from
-    e = 0.8, AR = 10); ``M_u = 0``; ``X_u = -0.08939 1/s`` and ``Z_u/V = -1.338e-3 1/ft`` fitted so
-    the phugoid is ``-0.042 +- 0.172j``; the short period then is ``-2.258 +- 2.644j`` (JSBSim
-    ``-2.26 +- 2.64j``). Elevator: unit command = 0.2236 rad (Iyy = 26000 slug ft^2, Cm_de = -1.74),
-    ``Z_de/V = -0.0387 1/s``; throttle ``X_dt = 6 ft/s^2`` per unit (about 2000 lbf).
-
-    Icing: AllIce ``k`` factors (sec. 5.2) scale ``Zw`` (CL_alpha), ``Zq``, ``Z_de``, ``M_alpha``,
-    ``M_q``, ``M_de`` by ``(1 + k eta)`` and ``X_u`` by ``(1 + k_CXo eta)`` (drag).
-
-    Parameters
-    ----------
-    icing_eta : float
-        Icing severity eta [-], 0 = clean; the UIUC files say not above about 0.4.
-    """
-    if not 0.0 <= icing_eta <= 0.5:
-        raise DesignError(f"icing_eta = {icing_eta} outside [0, 0.5]; the Bragg model is only meant for eta <= 0.4")
-    e, k = icing_eta, _K_ICE
-    g = 32.174
-    Xu = -0.08939061 * (1 + k["CXo"] * e)
-    Xa = 17.682557276520647
-    ZuV = -1.33810742e-03
-    Zw = -1.22 * (1 + k["CZ_a"] * e)
-    ZqV = -0.08458565818181815 * (1 + k["CZ_q"] * e)
-    Ma, Mq = -8.8 * (1 + k["Cm_a"] * e), -3.29 * (1 + k["Cm_q"] * e)
-    Mde, ZdeV = -1.99 * (1 + k["Cm_de"] * e), -0.0387 * (1 + k["CZ_de"] * e)
-    A = np.array([
-        [Xu, Xa, 0.0, -g],  # dV/dt = Xu V + X_alpha alpha - g theta
-        [ZuV, Zw, 1.0 + ZqV, 0.0],  # d alpha/dt = Zu/V V + Zw alpha + (1 + Zq/V) q
-        [0.0, Ma, Mq, 0.0],  # dq/dt = M_alpha alpha + Mq q
-        [0.0, 0.0, 1.0, 0.0],  # d theta/dt = q
-    ])
-    B = np.array([[0.0, 6.0], [ZdeV, 0.0], [Mde, 0.0], [0.0, 0.0]])
-    names = ("vt_fps", "alpha_rad", "q_radps", "theta_rad")
-    return LinearModel(
-        A=A, B=B, C=np.eye(4), D=np.zeros((4, 2)), dt_s=0.0, state_names=names,
-        input_names=("elevator_cmd_norm", "throttle_cmd_norm"), output_names=names,
-        x0=np.array([218.0, 0.0, 0.0, 0.0]), u0=np.array([0.0, 0.797]), y0=np.array([218.0, 0.0, 0.0, 0.0]),
-        meta={"source": "INTERIM hand-built model (lmi_filter.twin_otter_longitudinal_interim); replace by the linearizer's",
-              "icing_eta": icing_eta},
-    )
-
 
 # ----------------------------------------------------------------------------- design
 
@@ -297,6 +240,56 @@ def _solve_literal(A: Array, C: Array, X: Array, G: Array, h: float, eps: float,
     return prob.status, float(prob.value) if prob.value is not None else -np.inf, P.value, W.value, Lam.value
 
 
+def _solve_information_form(A: Array, C: Array, x: Array, G: Array, h: float, eps: float, method: str, obj_w: Array,
+                            solver: str, margin: float, n_lambda: int) -> tuple[str, float, Array, Array, Array]:
+    """Theorem 5.2.2 / 5.3.2 in ``Y = P^-1`` (scaled, V = I) with a line search over the detection eigenvalue.
+
+    ``n_lambda`` grid points over ``(-h, 0)``, then 10 golden-section steps between the best point's
+    neighbours; returns status, objective, ``P``, ``W`` (``G W G' = Q~``, the implied process noise)
+    and ``Lambda`` of the best feasible ``lambda``.
+    """
+    best: tuple[float, float, Array | None, str] = (np.inf, np.nan, None, "infeasible")
+
+    def f(lam: float) -> float:
+        nonlocal best
+        st, v, Yv = _solve_y(A, C, x, lam, h, eps, method, obj_w, solver, margin)
+        ok = st in ("optimal", "optimal_inaccurate") and Yv is not None
+        if ok and v < best[0]:
+            best = (v, lam, Yv, st)
+        return v if ok else np.inf
+
+    grid = -h * np.geomspace(1e-3, 1.0 - 1e-3, n_lambda)
+    vals = [f(lam) for lam in grid]
+    i = int(np.argmin(vals))
+    if np.isfinite(vals[i]):  # golden section on [grid[i+1], grid[i-1]] (the grid is decreasing)
+        a, b = grid[min(i + 1, n_lambda - 1)], grid[max(i - 1, 0)]
+        gr = (np.sqrt(5) - 1) / 2
+        c, d = b - gr * (b - a), a + gr * (b - a)
+        fc, fd = f(c), f(d)
+        for _ in range(10):
+            if fc < fd:
+                b, d, fd = d, c, fc
+                c = b - gr * (b - a)
+                fc = f(c)
+            else:
+                a, c, fc = c, d, fd
+                d = a + gr * (b - a)
+                fd = f(d)
+    val, lam_best, Yv, status = best
+    if Yv is None:
+        raise DesignError(
+            f"LMI ({method}) is infeasible for every detection eigenvalue in (-{h}, 0) 1/s with epsilon = {eps}: "
+            "no LQ detection filter with these bounds. Increase h (allow faster poles) or epsilon (looser alignment)."
+        )
+    Y = 0.5 * (Yv + Yv.T)
+    if np.min(np.linalg.eigvalsh(Y)) <= 0:
+        raise DesignError(f"LMI ({method}) returned a Y that is not positive definite; try solver='SCS'")
+    P = np.linalg.inv(Y)
+    Q = P @ (C.T @ C - Y @ A - A.T @ Y) @ P  # implied process noise Q~ = P N P
+    W = np.linalg.lstsq(G, np.linalg.lstsq(G, Q, rcond=None)[0].T, rcond=None)[0].T  # G W G' = Q~
+    return status, val, P, W, np.array([[lam_best]])
+
+
 def lmi_detection_gain(
     A: NDArray,
     C: NDArray,
@@ -394,49 +387,8 @@ def lmi_detection_gain(
                               "Use method='literal' or a Beard-Jones filter.")
         if np.min(np.linalg.eigvalsh(Gs @ Gs.T)) <= 1e-12 * max(1.0, np.linalg.norm(Gs) ** 2):
             raise DesignError("G must have full row rank for the information-form LMI (W = implied Q~); use method='literal'")
-        x = Xs[:, 0]
-        best: tuple[float, float, Array | None, str] = (np.inf, np.nan, None, "infeasible")
-
-        def f(lam: float) -> float:
-            nonlocal best
-            st, v, Yv = _solve_y(As, Cs, x, lam, h_radps, epsilon, method, w0, solver, margin)
-            ok = st in ("optimal", "optimal_inaccurate") and Yv is not None
-            if ok and v < best[0]:
-                best = (v, lam, Yv, st)
-            return v if ok else np.inf
-
-        grid = -h_radps * np.geomspace(1e-3, 1.0 - 1e-3, n_lambda)
-        vals = [f(l) for l in grid]
-        i = int(np.argmin(vals))
-        if np.isfinite(vals[i]):
-            lo, hi = grid[min(i + 1, n_lambda - 1)], grid[max(i - 1, 0)]  # grid is decreasing
-            gr = (np.sqrt(5) - 1) / 2
-            a, b = lo, hi
-            c_, d_ = b - gr * (b - a), a + gr * (b - a)
-            fc, fd = f(c_), f(d_)
-            for _ in range(10):
-                if fc < fd:
-                    b, d_, fd = d_, c_, fc
-                    c_ = b - gr * (b - a)
-                    fc = f(c_)
-                else:
-                    a, c_, fc = c_, d_, fd
-                    d_ = a + gr * (b - a)
-                    fd = f(d_)
-        val, lam_best, Yv, status = best
-        if Yv is None:
-            raise DesignError(
-                f"LMI ({method}) is infeasible for every detection eigenvalue in (-{h_radps}, 0) 1/s with epsilon = {epsilon}: "
-                "no LQ detection filter with these bounds. Increase h (allow faster poles) or epsilon (looser alignment)."
-            )
-        Ys = 0.5 * (Yv + Yv.T)
-        if np.min(np.linalg.eigvalsh(Ys)) <= 0:
-            raise DesignError(f"LMI ({method}) returned a Y that is not positive definite; try solver='SCS'")
-        Ps = np.linalg.inv(Ys)
-        Nm = Cs.T @ Cs - Ys @ As - As.T @ Ys
-        Qs = Ps @ Nm @ Ps  # implied process noise in scaled coordinates
-        Ws = np.linalg.lstsq(Gs, np.linalg.lstsq(Gs, Qs, rcond=None)[0].T, rcond=None)[0].T  # G W G' = Q~
-        Lam = np.array([[lam_best]])
+        status, val, Ps, Ws, Lam = _solve_information_form(As, Cs, Xs[:, 0], Gs, h_radps, epsilon, method, w0, solver, margin,
+                                                           n_lambda)
     solve_time = time.perf_counter() - t0
     Ps = 0.5 * (Ps + Ps.T)
     P = T @ Ps @ T.T
@@ -453,13 +405,12 @@ def lmi_detection_gain(
     qmin = float(np.min(np.linalg.eigvalsh(Qt)) / max(np.linalg.norm(Qt, 2), 1e-300))
     Xo = sla.orth(X)
     Lam = np.asarray(Lam, float)
-    Acl_s = As - (Ps @ Cs.T) @ Cs
-    res_s = float(np.linalg.norm(Xs @ Lam - Acl_s @ Xs, 2))
-    Rs = Xs @ Lam - Acl_s @ Xs
+    Rs = Xs @ Lam - (As - Ps @ Cs.T @ Cs) @ Xs  # alignment residual in the scaled coordinates of the solve
+    res_s = float(np.linalg.norm(Rs, 2))
     res_c = res_s if method == "literal" else float(np.sqrt(np.max(np.linalg.eigvalsh(Rs.T @ np.linalg.inv(Ps) @ Rs))))
     ang = alignment_error_deg(Acl, Xo, Lam)
     design = LmiFilterDesign(
-        L, P, T @ Ws @ T.T if method == "literal" else Ws, Lam, Acl, poles[np.argsort(poles.real)], Xo, method,
+        L, P, Ws, Lam, Acl, poles[np.argsort(poles.real)], Xo, method,
         0.0 if method == "direct" else epsilon, h_radps, res_s, res_c, ang, float(np.max(ssv)), omega,
         float(np.linalg.norm(ric_res, 2) / max(np.linalg.norm(GWG, 2), 1e-300)), qmin, val, solver, status, solve_time,
     )
@@ -531,14 +482,14 @@ def design_lmi_filter(
 # ----------------------------------------------------------------------------- runtime
 
 
-class LmiDetectionFilter:
+class LmiDetectionFilter(DirectionalObserver):
     """Runs an LMI-designed continuous observer at sample time ``dt_s`` (``reset`` / ``step``).
 
     ``xh(k+1) = Phi xh(k) + Gam_u u(k) + Gam_y y(k)`` is the zero-order-hold discretization of
     ``dxh/dt = (A - L C) xh + (B - L D) u + L y``; ``r(k) = y(k) - C xh(k) - D u(k)``. The statistic
     is ``r' S^-1 r`` (``S`` from the discrete noise ``Qd``, ``Rd``; ``Rd = I`` if not given) against the
-    chi-square threshold at ``alpha``; isolation by the angle between ``r`` and ``C X_cl`` for the single
-    fault, both whitened by ``S^-1/2`` (so mixed units weigh by their noise).
+    chi-square threshold at ``alpha``; isolation by the whitened angle between ``r`` and ``C X_cl``
+    for the single fault (:class:`~fdi_sim.detectors.directional_observer.DirectionalObserver`).
 
     Parameters
     ----------
@@ -555,50 +506,19 @@ class LmiDetectionFilter:
         Discrete measurement-noise covariance for ``S``.
     Qd : (n, n) array, optional
         Discrete process-noise covariance for ``S``.
+    max_angle_rad : float
+        Largest residual angle [rad] accepted for isolation.
     """
 
     def __init__(self, model: LinearModel, design: LmiFilterDesign, fault: str, dt_s: float, alpha: float = 1e-3,
                  Rd: NDArray | None = None, Qd: NDArray | None = None, max_angle_rad: float = 0.35, id: str = "lmi-detection-v1") -> None:
         if dt_s <= 0:
             raise DesignError("dt_s must be > 0")
-        if not 0.0 < alpha < 1.0:
-            raise DesignError(f"alpha must be in (0, 1), got {alpha}")
-        self.id, self.hypotheses, self.alpha, self.max_angle_rad = id, (fault,), alpha, max_angle_rad
-        A, B, C, D = (np.asarray(M, float) for M in (model.A, model.B, model.C, model.D))
-        L = design.L
-        n, m, p = A.shape[0], B.shape[1], C.shape[0]
-        Ao = A - L @ C
-        Bo = np.hstack([B - L @ D, L])
-        blk = np.zeros((n + m + p, n + m + p))
-        blk[:n, :n], blk[:n, n:] = Ao * dt_s, Bo * dt_s
-        E = sla.expm(blk)
-        self._Phi, self._Gu, self._Gy = E[:n, :n], E[:n, n:n + m], E[:n, n + m:]
-        self._C, self._D = C, D
-        self._u0, self._y0 = np.asarray(model.u0), np.asarray(model.y0)
-        Rm = np.eye(p) if Rd is None else np.asarray(Rd, float)
-        # discrete error e(k+1) = Phi e + (w) - Gam_y v ; r = C e + v
-        Qm = np.zeros((n, n)) if Qd is None else np.asarray(Qd, float)
-        Pm = sla.solve_discrete_lyapunov(self._Phi, Qm + self._Gy @ Rm @ self._Gy.T)
-        self.S = C @ Pm @ C.T + Rm
-        self._Sinv = np.linalg.inv(self.S)
-        self._W = np.linalg.inv(np.linalg.cholesky(self.S))  # whitening: angles in S^-1/2 coordinates
-        cdir = self._W @ C @ design.X_cl[:, 0]
-        self._dir = cdir / np.linalg.norm(cdir)
-        self.threshold = float(chi2.ppf(1 - alpha, p))
-        self._x = np.zeros(n)
-
-    def reset(self, rng: np.random.Generator | None = None) -> None:
-        """Zero the state estimate (deterministic filter)."""
-        self._x = np.zeros_like(self._x)
-
-    def step(self, t_s: float, u: NDArray, y: NDArray) -> Residual:
-        """One sample: time [s], absolute ``u`` and ``y``."""
-        du = np.asarray(u, float) - self._u0
-        dy = np.asarray(y, float) - self._y0
-        r = dy - self._C @ self._x - self._D @ du
-        self._x = self._Phi @ self._x + self._Gu @ du + self._Gy @ dy
-        stat = float(r @ self._Sinv @ r)
-        ang = angle_rad(self._W @ r, self._dir)
-        alarm = stat > self.threshold
-        iso = self.hypotheses[0] if alarm and ang < self.max_angle_rad else None
-        return Residual(t_s, r, stat, len(r), self.threshold, alarm, iso, np.array([ang]))
+        A, B, C, D, L = model.A, model.B, model.C, model.D, design.L
+        p = C.shape[0]
+        observer = LinearModel(A=A - L @ C, B=np.hstack([B - L @ D, L]), C=C, D=np.zeros((p, B.shape[1] + p))).discretize(dt_s)
+        Phi, Gam_u, Gam_y = observer.A, observer.B[:, : B.shape[1]], observer.B[:, B.shape[1]:]
+        # discrete error e(k+1) = Phi e + w - Gam_y v, r = C e + v
+        self.S = observer_residual_covariance(Phi, C, Gam_y, Qd, np.eye(p) if Rd is None else Rd)
+        super().__init__(DiscreteObserver(Phi, Gam_u, Gam_y, C, D, model.u0, model.y0), self.S, C @ design.X_cl[:, :1],
+                         (fault,), alpha, max_angle_rad, id)

@@ -54,6 +54,16 @@ def test_discrete_law_eq_23_by_hand() -> None:
     assert np.isclose(est.A[0, 0], 0.5 + 0.5 * -1.0 * 2.0)  # A0 += M eps xh'
     assert np.isclose(est.B[0, 0], 1.0 + 0.25 * -1.0 * 3.0)  # B0 += N eps u'
     assert np.isclose(obs.x_hat[0], 0.5 * 2.0 + 1.0 * 3.0 + 0.2 * -1.0)
+    # masked: only the adapted entries move, each by eq. 23 (full matrices M eps xh', N eps u', masked by hand)
+    A2, B2, M, N = np.array([[0.9, 0.1], [0.0, 0.8]]), np.array([[0.0], [0.5]]), np.array([[0.3, 0.0], [0.1, 0.2]]), np.eye(2)
+    mask_A, mask_B = np.array([[True, False], [True, True]]), np.array([[False], [True]])
+    model2 = LinearModel(A=A2, B=B2, C=np.eye(2), D=np.zeros((2, 1)), dt_s=0.1)
+    obs2 = AdaptiveObserver(model2, np.zeros((2, 2)), M, N, mask_A, mask_B, x0_hat=np.array([1.0, -2.0]))
+    eps, xh, u = np.array([0.5, 1.5]) - np.array([1.0, -2.0]), np.array([1.0, -2.0]), np.array([4.0])
+    obs2.step(0.0, u, np.array([0.5, 1.5]))
+    est = obs2.estimates()
+    assert np.allclose(est.A, A2 + np.outer(M @ eps, xh) * mask_A) and np.allclose(est.B, B2 + np.outer(N @ eps, u) * mask_B)
+    assert est.names == ("A[x0,x0]", "A[x1,x0]", "A[x1,x1]", "B[x1,u0]")
 
 
 def test_conditions_eq_34_against_a_hand_computation() -> None:
@@ -139,7 +149,7 @@ def test_fig_9_example_2_tracking() -> None:
 
 def test_registered_observer_detectors_follow_the_contract() -> None:
     from fdi_sim import registry
-    from fdi_sim.detectors.lmi_filter import twin_otter_longitudinal_interim
+    from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim
 
     m = twin_otter_longitudinal_interim()
     noise = {"process_std": [0.02, 2e-4, 1e-3, 1e-5], "sensor_std": [0.1, 0.002, 0.002, 0.002]}

@@ -7,18 +7,11 @@ import scipy.linalg as sla
 from scipy.signal import place_poles
 
 from fdi_sim.detectors.base import Detector
-from fdi_sim.detectors.beard_jones import (
-    BeardJonesBank,
-    BeardJonesFilter,
-    angle_rad,
-    beard_jones_gain,
-    design_detection_filter,
-    detection_space,
-    output_separability,
-    plan_bank,
-)
-from fdi_sim.detectors.lmi_filter import twin_otter_longitudinal_interim
+from fdi_sim.detectors.beard_jones import angle_rad, beard_jones_gain, detection_space, output_separability
+from fdi_sim.detectors.beard_jones_filter import BeardJonesBank, BeardJonesFilter, design_detection_filter, plan_bank
+from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim
 from fdi_sim.errors import DesignError
+from fdi_sim.linear.model import LinearModel
 
 # the patent's example (eq. 2.47), the same as Beard's and White's
 A3 = np.array([[0.0, 3.0, 4.0], [1.0, 2.0, 3.0], [0.0, 2.0, 5.0]])
@@ -56,8 +49,8 @@ def test_matrices_of_eq_2_49() -> None:
     Ai = A3 - d.L_detection @ C3
     # eq. 2.49 prints A_i[0, 2] = -.45; the formula eq. 2.46 gives -4.5 (a dropped digit), all else as printed
     assert np.allclose(Ai, [[0, 11.5, -4.5], [1, -0.5, 5.5], [0, 7.5, -0.5]], atol=1e-12)
-    cf = C3 @ F3
-    Ci = (np.eye(2) - np.outer(cf, cf) / (cf @ cf)) @ C3
+    cf = d.output_directions  # the design's own C f (eq. 2.45: C_i = (I - Cf (Cf)^+) C)
+    Ci = (np.eye(2) - cf @ np.linalg.pinv(cf)) @ C3
     assert np.allclose(Ci, [[0, 0.5, 0.5], [0, 0.5, 0.5]], atol=1e-12)
     assert np.allclose(d.L_detection, [[-8.5, 8.5], [2.5, -2.5], [-5.5, 5.5]], atol=1e-12)
     # independent: eq. 2.44 with f -> D_f, computed here from the printed detection space
@@ -166,8 +159,6 @@ def test_two_faults_one_filter_against_independent_rank_check() -> None:
 
 
 def test_bank_when_faults_share_an_output_direction() -> None:
-    from fdi_sim.linear.model import LinearModel
-
     B = np.column_stack([F3, [0.0, -1.0, 1.0]])  # C b2 is parallel to C b1
     Ad = np.eye(3) + 0.01 * (A3 - 10 * np.eye(3))  # a discrete model keeps the directions as given
     model = LinearModel(A=Ad, B=B, C=C3, D=np.zeros((2, 2)), dt_s=0.01, input_names=("a_cmd_norm", "b_cmd_norm"))
@@ -175,6 +166,30 @@ def test_bank_when_faults_share_an_output_direction() -> None:
     assert [d.gain.names for d in designs] == [("a_cmd_norm",), ("b_cmd_norm",)]
     bank = BeardJonesBank([BeardJonesFilter(d) for d in designs])
     assert isinstance(bank, Detector) and bank.hypotheses == ("a_cmd_norm", "b_cmd_norm")
+    # the bank's record, rebuilt from the same filters stepped one by one
+    alone = [BeardJonesFilter(d) for d in designs]
+    x = np.zeros(3)
+    for k in range(120):
+        u = np.array([0.3 * np.sin(0.2 * k), 0.0])
+        got, parts = bank.step(k * 0.01, u, C3 @ x), [f.step(k * 0.01, u, C3 @ x) for f in alone]
+        x = Ad @ x + B @ (u + (np.array([0.0, 2.0]) if k >= 40 else 0.0))
+        ratios = [p.statistic / p.threshold for p in parts]
+        j = int(np.argmax(ratios))
+        assert np.array_equal(got.r, np.concatenate([p.r for p in parts]))
+        assert np.array_equal(got.scores, np.concatenate([p.scores for p in parts]), equal_nan=True)
+        assert got.statistic == ratios[j] and got.alarm == parts[j].alarm and got.isolation == parts[j].isolation
+    assert got.alarm
+
+
+def test_single_output_detection_space_is_the_whole_state() -> None:
+    # one output: C' = (I - Cf (Cf)^+) C is rounding noise (~1e-16 for this seed), D_f = R^n (order n); a purely
+    # relative rank tolerance (scipy's null_space) would call the noise full rank and report an empty detection space
+    rng = np.random.default_rng(0)
+    A, C, f = rng.normal(size=(3, 3)), rng.normal(size=(1, 3)), rng.normal(size=3)
+    ds = detection_space(A, C, f)
+    assert ds.order == 3 and ds.basis.shape == (3, 3)
+    d = beard_jones_gain(A, C, f[:, None], [[-4.0, -5.0, -6.0]], [])
+    assert np.allclose(np.sort(d.poles.real), [-6.0, -5.0, -4.0], atol=1e-7)
 
 
 def _simulate_twin_otter_fault(fault: str, bias: float, dt: float = 1 / 120, steps: int = 600):
@@ -208,5 +223,10 @@ def test_twin_otter_filter_isolates_actuator_faults(fault: str, bias: float) -> 
     assert max(np.linalg.norm(r.r) for r in before) < 1e-10  # matched, noise-free: zero residual
     i = design.gain.names.index(fault)
     assert max(r.scores[i] for r in after) < 1e-6  # residual on C f_i all the time
+    W = np.linalg.inv(np.linalg.cholesky(design.S))  # scores are angles in S^-1/2-whitened coordinates
+    for r in after[::50]:
+        want = [angle_rad(W @ r.r, W @ design.gain.output_directions[:, h]) for h in range(2)]
+        assert np.allclose(r.scores, want, rtol=1e-9, atol=1e-12)
+        assert np.isclose(r.statistic, r.r @ np.linalg.solve(design.S, r.r))
     assert min(r.scores[1 - i] for r in after) > 0.1
     assert any(r.alarm for r in after) and {r.isolation for r in after if r.alarm} == {fault}

@@ -1,6 +1,6 @@
 """Kalman innovation tests (Sidar 1982 sec. II-III, eq. 10) and the multiple-model bank.
 
-Twin Otter: ``twin_otter_longitudinal_interim()`` (INTERIM model, see fdi_sim/detectors/lmi_filter.py),
+Twin Otter: ``twin_otter_longitudinal_interim()`` (INTERIM model, see fdi_sim/detectors/twin_otter_interim.py),
 discretized at 1/120 s.
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ from fdi_sim.detectors.kalman import (
     steady_state_kalman,
     whiteness_test,
 )
-from fdi_sim.detectors.lmi_filter import twin_otter_longitudinal_interim
+from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
@@ -187,6 +187,23 @@ def test_detectors_follow_the_contract(design) -> None:
     assert np.isclose(nis(np.array([1.0, 2.0]), np.diag([1.0, 4.0])), 2.0)
 
 
+def test_windowed_detector_statistic_is_the_window_test_of_its_last_innovations(clean, design) -> None:
+    run = simulate_discrete(clean, _excitation(130), QD, RD, np.random.default_rng(4))
+    dets = {t: KalmanInnovationDetector(design, alpha=ALPHA, test=t, window_n=40, n_lags=3) for t in ("bias", "whiteness")}
+    nus = []
+    for k in range(130):
+        out = {t: d.step(run.t_s[k], run.u[k], run.y[k]) for t, d in dets.items()}
+        nus.append(out["bias"].r)
+        assert out["bias"].valid == (k >= 39)
+        if k >= 39:  # the ring buffer wraps three times over the run
+            W = np.array(nus[-40:])
+            assert np.isclose(out["bias"].statistic, bias_test(W, design.S, ALPHA).statistic, rtol=1e-10)
+            assert np.isclose(out["whiteness"].statistic, whiteness_test(W, design.S, 3, ALPHA).statistic, rtol=1e-10)
+    bias, white = dets["whiteness"].window_tests()
+    assert np.isclose(bias.statistic, out["bias"].statistic) and np.isclose(white.statistic, out["whiteness"].statistic)
+    assert white.dof == 16 * 3 and white.threshold == out["whiteness"].threshold
+
+
 def test_bad_input_raises(clean) -> None:
     with pytest.raises(DesignError, match="positive definite"):
         steady_state_kalman(clean, QD, -RD)
@@ -197,3 +214,5 @@ def test_bad_input_raises(clean) -> None:
         steady_state_kalman(unstable_unobs, np.eye(2), np.eye(1))
     with pytest.raises(DesignError, match="test must be"):
         KalmanInnovationDetector(steady_state_kalman(clean, QD, RD), test="cusum")
+    with pytest.raises(DesignError, match="n_lags"):
+        KalmanInnovationDetector(steady_state_kalman(clean, QD, RD), test="whiteness", window_n=5, n_lags=5)
