@@ -6,6 +6,7 @@ Writes docs/figures/parity_*.png and prints every number quoted in docs/parity.m
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -26,10 +27,10 @@ from fdi_sim.detectors.hagenblad_f16 import (  # noqa: E402
     f16_reading,
     simulate_f16,
 )
-from fdi_sim.detectors.parity import AdditiveFaults  # noqa: E402
-from fdi_sim.detectors.pca import stack_data_windows  # noqa: E402
-from fdi_sim.detectors.robust_parity import example_icing_models, robust_parity, select_outputs  # noqa: E402
-from fdi_sim.detectors.stochastic_parity import compare_nominal_vs_robust, incorrect_diagnosis_matrix  # noqa: E402
+from fdi_sim.detectors.parity import AdditiveFaults, select_outputs  # noqa: E402
+from fdi_sim.detectors.parity_mismatch import compare_nominal_vs_robust  # noqa: E402
+from fdi_sim.detectors.robust_parity import example_icing_models, robust_parity  # noqa: E402
+from fdi_sim.detectors.stochastic_parity import incorrect_diagnosis_matrix  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "figures"
 COLORS = ["k", "tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown"]
@@ -110,7 +111,7 @@ def fig_f16(reading, rng):
 def fig_pca(reading, rng):
     pca, sig = f16_pca_model(reading, 20000, rng)
     _, sv, Vt = np.linalg.svd(sig)
-    groups = residual_groups(lambda w: pca.normalized_residual(stack_data_windows(w.Y, w.U)) @ Vt.T, reading, rng)
+    groups = residual_groups(lambda w: pca.normalized_residual(w.Z) @ Vt.T, reading, rng)
     fig, axes = plt.subplots(1, 3, figsize=(16, 5))
     for ax, (i, j) in zip(axes[:2], [(0, 1), (2, 3)]):
         for g, c, lab in zip(groups, COLORS, LABELS):
@@ -221,8 +222,6 @@ def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(2024)
     reading = f16_reading(*PAPER_READING)
-    import sys
-
     parts = set(sys.argv[1:]) or {"f16", "readings", "robust"}
     if "f16" in parts:
         fig_f16(reading, rng)

@@ -10,27 +10,15 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.detectors.parity import (
-    AdditiveFaults,
-    WindowParityDetector,
-    fault_signatures,
-    minimum_order,
-    parity_space,
-)
-from fdi_sim.detectors.pca import (
-    estimate_fault_signatures,
-    make_pca_detector,
-    pca_train_from_series,
-    sliding_windows,
-    stack_data_windows,
-)
+from fdi_sim.detectors.parity import AdditiveFaults, fault_signatures, minimum_order, parity_detector, parity_space
+from fdi_sim.detectors.pca import estimate_fault_signatures, make_pca_detector, pca_train, series_windows
 from fdi_sim.detectors.robust_parity import make_robust_parity_detector, robust_parity
 from fdi_sim.detectors.stochastic_parity import (
     make_stochastic_parity_detector,
     noise_window_covariance,
     stochastic_parity,
 )
-from fdi_sim.errors import DesignError
+from fdi_sim.detectors.window_detector import WindowParityDetector
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.registry import register
 
@@ -39,6 +27,11 @@ __all__ = ["make_parity", "make_pca", "make_robust_parity", "make_stochastic_par
 
 def _faults(model: LinearModel, actuators: Sequence[str], sensors: Sequence[str]) -> AdditiveFaults | None:
     return AdditiveFaults.from_model(model, actuators, sensors) if (actuators or sensors) else None
+
+
+def _order(model: LinearModel, order_s: int | None) -> int:
+    """The given parity order, or the model's minimum order."""
+    return minimum_order(model.A, model.C) if order_s is None else int(order_s)
 
 
 def make_parity(
@@ -57,19 +50,14 @@ def make_parity(
     statistic is ``r'(W'SW)^-1 r`` (chi-square threshold for ``p_false_alarm``); without it give
     ``threshold`` on ``r'r``. Named actuators/sensors give isolation by angle.
     """
-    s = minimum_order(model.A, model.C) if order_s is None else int(order_s)
+    s = _order(model, order_s)
     space = parity_space(model, s)
-    cov = None
-    if R is not None:
-        S = noise_window_covariance(model, s, R)
-        cov = space.W.T @ S @ space.W
+    cov = None if R is None else space.W.T @ noise_window_covariance(model, s, R) @ space.W  # W'SW
     faults = _faults(model, actuators, sensors)
-    sig = fault_signatures(model, faults, s, space.W) if faults else None
-    return WindowParityDetector(
-        detector_id="parity-v1", order_s=s, proj_y=space.W.T, proj_u=space.projection_u(),
-        known_inputs=space.known_inputs, u0=model.u0, y0=model.y0, cov_r=cov, threshold=threshold,
-        p_false_alarm=p_false_alarm, signatures=sig, hypotheses=faults.names if faults else (),
-        reject_angle_rad=reject_angle_rad,
+    return parity_detector(
+        "parity-v1", model, space, cov_r=cov, threshold=threshold, p_false_alarm=p_false_alarm,
+        signatures=fault_signatures(model, faults, s, space.W) if faults else None,
+        hypotheses=faults.names if faults else (), reject_angle_rad=reject_angle_rad,
     )
 
 
@@ -89,8 +77,7 @@ def make_robust_parity(
     ``measurement_sqrt``, ``output_scale``, ``input_scale`` to :func:`robust_parity`. The statistic
     is whitened by the design's average residual covariance.
     """
-    s = minimum_order(model.A, model.C) if order_s is None else int(order_s)
-    d = robust_parity([model, *perturbed], s, n_relations, weights, **design)
+    d = robust_parity([model, *perturbed], _order(model, order_s), n_relations, weights, **design)
     return make_robust_parity_detector(model, d, threshold=threshold, p_false_alarm=p_false_alarm)
 
 
@@ -107,12 +94,11 @@ def make_stochastic_parity(
     reject_angle_rad: float = np.pi,
 ) -> WindowParityDetector:
     """Hagenblad et al. Algorithm 1: normalized parity residual, chi-square test, angle isolation."""
-    s = minimum_order(model.A, model.C) if order_s is None else int(order_s)
     faults = _faults(model, actuators, sensors)
     if faults is None:
         # detection only: a zero-signature placeholder keeps the design code path single
         faults = AdditiveFaults(Bf=np.zeros((model.n_states, 0)), Df=np.zeros((model.n_outputs, 0)), names=())
-    d = stochastic_parity(model, s, faults, R, Bv, Q)
+    d = stochastic_parity(model, _order(model, order_s), faults, R, Bv, Q)
     return make_stochastic_parity_detector(model, d, threshold, p_false_alarm, reject_angle_rad)
 
 
@@ -133,20 +119,12 @@ def make_pca(
     values and names. ``n_residuals`` defaults to ``L r - n`` (the parity dimension, eq. 7);
     ``fault_data`` maps hypothesis names to ``(u, y)`` logs with that fault (eq. 22).
     """
-    cols = model.control_columns()
+    u0, y0 = model.u0[model.control_columns()], model.y0
     nr = window_L * model.n_outputs - model.n_states if n_residuals is None else int(n_residuals)
-    u0, y0 = model.u0[cols], model.y0
-    pca = pca_train_from_series(train_u, train_y, window_L, nr, u0, y0)
-    sig, names = None, ()
-    if fault_data:
-        names = tuple(fault_data)
-        Zs = []
-        for name in names:
-            u, y = (np.asarray(a, float) for a in fault_data[name])
-            Zs.append(stack_data_windows(sliding_windows(y - y0, window_L), sliding_windows(u - u0, window_L)))
-        sig = estimate_fault_signatures(pca, Zs)
-    if threshold is None and not 0 < p_false_alarm < 1:
-        raise DesignError(f"p_false_alarm must be in (0, 1), got {p_false_alarm}")
+    pca = pca_train(series_windows(train_u, train_y, window_L, u0, y0), nr)
+    names = tuple(fault_data or ())
+    sig = estimate_fault_signatures(
+        pca, [series_windows(*fault_data[name], window_L, u0, y0) for name in names]) if names else None
     return make_pca_detector(model, pca, window_L, sig, names, threshold, p_false_alarm, reject_angle_rad)
 
 

@@ -23,6 +23,7 @@ state at the start of the window).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -211,6 +212,11 @@ class F16Windows:
     Y: NDArray[np.float64]
     U: NDArray[np.float64]
 
+    @property
+    def Z(self) -> NDArray[np.float64]:
+        """PCA data vectors ``Z_t = (Y_t; U_t)`` (eq. 15), rows = windows."""
+        return stack_data_windows(self.Y, self.U)
+
 
 def simulate_f16(
     reading: F16Reading,
@@ -248,14 +254,14 @@ def simulate_f16(
     x = np.zeros((n_runs, 5))
     Rs = np.linalg.cholesky(reading.R)
     nv = reading.Bv.shape[1]
-    Qs = np.linalg.cholesky(reading.Q) if nv else None
+    Gv = np.linalg.cholesky(reading.Q).T @ reading.Bv.T if nv else None  # v' B_v' = z' Q^(1/2)' B_v'
     ys = np.empty((n_steps, n_runs, 3))
     us = np.sqrt(reading.input_var) * rng.standard_normal((n_steps, n_runs, 3))
     for k in range(n_steps):
         ys[k] = x @ C.T + df + rng.standard_normal((n_runs, 3)) @ Rs.T  # y = C x + D_f f + e
         x = x @ A.T + us[k] @ Bu.T + bf  # x+ = A x + B_u u + B_f f + B_v v
         if nv:
-            x = x + rng.standard_normal((n_runs, nv)) @ Qs.T @ reading.Bv.T
+            x = x + rng.standard_normal((n_runs, nv)) @ Gv
     # (steps, runs, 3) -> (runs, windows, L, 3) -> (runs*windows, L*3), oldest first
     Y = ys.transpose(1, 0, 2).reshape(n_runs * windows_per_run, window_L * 3)
     U = us.transpose(1, 0, 2).reshape(n_runs * windows_per_run, window_L * 3)
@@ -293,8 +299,24 @@ class F16StudyResult:
     n_windows: int
 
 
-def _p_correct(rates: NDArray, detectable: NDArray, alarm_rate: NDArray) -> NDArray[np.float64]:
-    return np.array([rates[j, j] if detectable[j] else alarm_rate[j] for j in range(rates.shape[0])])
+def _monte_carlo(
+    residual: Callable[[F16Windows], NDArray], signatures: NDArray, detectable: NDArray, reading: F16Reading,
+    n_windows: int, rng: np.random.Generator, window_L: int, p_false_alarm: float, exact: bool = False,
+) -> tuple[ThresholdEstimate, NDArray[np.float64], NDArray[np.float64]]:
+    """Threshold by simulation on fault-free windows, then Algorithm 1 on ``n_windows`` of each fault.
+
+    Returns the threshold, the (6, 7) isolation rates and ``p_correct``: the rate of isolating
+    fault j as j, or for an undetectable fault its alarm rate.
+    """
+    r0 = residual(simulate_f16(reading, None, n_windows, rng, window_L, exact=exact))
+    th = threshold_by_simulation(np.einsum("ij,ij->i", r0, r0), p_false_alarm)
+    rates = np.zeros((6, 7))
+    p_correct = np.zeros(6)
+    for j in range(6):
+        rj = residual(simulate_f16(reading, j, n_windows, rng, window_L, exact=exact))
+        rates[j] = isolation_rates(rj, signatures, detectable, th.h)
+        p_correct[j] = rates[j, j] if detectable[j] else np.mean(np.einsum("ij,ij->i", rj, rj) > th.h)
+    return th, rates, p_correct
 
 
 def f16_parity_study(
@@ -307,21 +329,11 @@ def f16_parity_study(
     its own ``n_windows`` and run through Algorithm 1 (detection + angle isolation).
     """
     design = f16_design(reading, window_L, exact)
-    r0 = design.residual(*_yu(simulate_f16(reading, None, n_windows, rng, window_L, exact=exact)))
-    th = threshold_by_simulation(np.einsum("ij,ij->i", r0, r0), p_false_alarm)
-    rates = np.zeros((6, 7))
-    alarm = np.zeros(6)
-    for j in range(6):
-        rj = design.residual(*_yu(simulate_f16(reading, j, n_windows, rng, window_L, exact=exact)))
-        rates[j] = isolation_rates(rj, design.mu_bar, design.detectable, th.h)
-        alarm[j] = np.mean(np.einsum("ij,ij->i", rj, rj) > th.h)
-    P = incorrect_diagnosis_matrix(design, reading.magnitudes)
-    return F16StudyResult(threshold=th, p_correct=_p_correct(rates, design.detectable, alarm), rates=rates,
-                          detectable=design.detectable, P_eq14=P, singular_values=None, n_windows=n_windows)
-
-
-def _yu(w: F16Windows) -> tuple[NDArray, NDArray]:
-    return w.Y, w.U
+    th, rates, p_correct = _monte_carlo(lambda w: design.residual(w.Y, w.U), design.mu_bar, design.detectable,
+                                        reading, n_windows, rng, window_L, p_false_alarm, exact)
+    return F16StudyResult(threshold=th, p_correct=p_correct, rates=rates, detectable=design.detectable,
+                          P_eq14=incorrect_diagnosis_matrix(design, reading.magnitudes), singular_values=None,
+                          n_windows=n_windows)
 
 
 def f16_pca_model(
@@ -334,13 +346,8 @@ def f16_pca_model(
     pitch) are barely excited and the smallest model-space eigenvalue approaches the altitude
     noise (1e-4), which tilts the estimated residual space (docs/parity.md).
     """
-    w = simulate_f16(reading, None, n_train, rng, window_L)
-    pca = pca_train(stack_data_windows(w.Y, w.U), n_residuals)
-    fault_Z = {}
-    for j in range(6):
-        wj = simulate_f16(reading, j, n_train, rng, window_L)
-        fault_Z[j] = stack_data_windows(wj.Y, wj.U)
-    sig = estimate_fault_signatures(pca, [fault_Z[j] for j in range(6)])
+    pca = pca_train(simulate_f16(reading, None, n_train, rng, window_L).Z, n_residuals)
+    sig = estimate_fault_signatures(pca, [simulate_f16(reading, j, n_train, rng, window_L).Z for j in range(6)])
     return pca, sig
 
 
@@ -356,15 +363,7 @@ def f16_pca_study(
     """
     pca, sig = f16_pca_model(reading, n_train, rng, window_L, n_residuals)
     detectable = np.linalg.norm(sig, axis=1) > 4.0 * np.sqrt(n_residuals / n_train)
-    w0 = simulate_f16(reading, None, n_windows, rng, window_L)
-    r0 = pca.normalized_residual(stack_data_windows(w0.Y, w0.U))
-    th = threshold_by_simulation(np.einsum("ij,ij->i", r0, r0), p_false_alarm)
-    rates = np.zeros((6, 7))
-    alarm = np.zeros(6)
-    for j in range(6):
-        wj = simulate_f16(reading, j, n_windows, rng, window_L)
-        rj = pca.normalized_residual(stack_data_windows(wj.Y, wj.U))
-        rates[j] = isolation_rates(rj, sig, detectable, th.h)
-        alarm[j] = np.mean(np.einsum("ij,ij->i", rj, rj) > th.h)
-    return F16StudyResult(threshold=th, p_correct=_p_correct(rates, detectable, alarm), rates=rates,
-                          detectable=detectable, P_eq14=None, singular_values=pca.eigenvalues, n_windows=n_windows)
+    th, rates, p_correct = _monte_carlo(lambda w: pca.normalized_residual(w.Z), sig, detectable, reading,
+                                        n_windows, rng, window_L, p_false_alarm)
+    return F16StudyResult(threshold=th, p_correct=p_correct, rates=rates, detectable=detectable, P_eq14=None,
+                          singular_values=pca.eigenvalues, n_windows=n_windows)

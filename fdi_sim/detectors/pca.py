@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.detectors.parity import WindowParityDetector
+from fdi_sim.detectors.window_detector import WindowParityDetector
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
@@ -25,6 +25,7 @@ __all__ = [
     "make_pca_detector",
     "pca_train",
     "pca_train_from_series",
+    "series_windows",
     "sliding_windows",
     "stack_data_windows",
     "suggest_residual_dimension",
@@ -134,11 +135,10 @@ def pca_train(Z: NDArray, n_residuals: int) -> PcaModel:
     return PcaModel(eigenvalues=ev, basis_model=V[:, : d - nr], W=V[:, d - nr:], D_r=D_r, n_samples=N)
 
 
-def pca_train_from_series(
-    u: NDArray, y: NDArray, window_L: int, n_residuals: int,
-    u0: NDArray | None = None, y0: NDArray | None = None,
-) -> PcaModel:
-    """Train from fault-free time series (a log): rows are samples of ``u`` (T, m) and ``y`` (T, r).
+def series_windows(
+    u: NDArray, y: NDArray, window_L: int, u0: NDArray | None = None, y0: NDArray | None = None
+) -> NDArray[np.float64]:
+    """Data vectors ``Z_t`` (eq. 15) of time series (a log): rows are samples of ``u`` (T, m) and ``y`` (T, r).
 
     Trim values ``u0``, ``y0`` are subtracted when given; windows slide by one sample.
     """
@@ -147,7 +147,15 @@ def pca_train_from_series(
         raise DesignError(f"u has {u.shape[0]} samples but y has {y.shape[0]}")
     u = u - (0 if u0 is None else np.asarray(u0, float))
     y = y - (0 if y0 is None else np.asarray(y0, float))
-    return pca_train(stack_data_windows(sliding_windows(y, window_L), sliding_windows(u, window_L)), n_residuals)
+    return stack_data_windows(sliding_windows(y, window_L), sliding_windows(u, window_L))
+
+
+def pca_train_from_series(
+    u: NDArray, y: NDArray, window_L: int, n_residuals: int,
+    u0: NDArray | None = None, y0: NDArray | None = None,
+) -> PcaModel:
+    """Train from fault-free time series (a log), see :func:`series_windows`."""
+    return pca_train(series_windows(u, y, window_L, u0, y0), n_residuals)
 
 
 def suggest_residual_dimension(eigenvalues: NDArray, min_residuals: int = 1) -> int:

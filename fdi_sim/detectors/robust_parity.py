@@ -30,12 +30,8 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.detectors.parity import (
-    WindowParityDetector,
-    input_toeplitz,
-    observability_matrix,
-    select_outputs,
-)
+from fdi_sim.detectors.parity import input_columns, input_toeplitz, observability_matrix, parity_basis
+from fdi_sim.detectors.window_detector import WindowParityDetector, _psd_sqrt
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
@@ -50,7 +46,6 @@ __all__ = [
     "robust_parity",
     "robustness_cost",
     "s_svd",
-    "select_outputs",
     "stationary_state_sqrt",
 ]
 
@@ -66,10 +61,6 @@ def _sqrt_or_eye(M: NDArray | None, size: int, what: str) -> NDArray[np.float64]
     if M.shape != (size, size):
         raise DesignError(f"{what} must be a ({size}, {size}) square root of a covariance, got {M.shape}")
     return M
-
-
-def _columns(model: LinearModel, kind: str) -> list[int]:
-    return [i for i, k in enumerate(model.input_kinds) if k == kind]
 
 
 def stationary_state_sqrt(
@@ -94,15 +85,13 @@ def stationary_state_sqrt(
             f"model has spectral radius {rho:.6f} >= 1, so no stationary state covariance exists; "
             "pass state_sqrt (e.g. the identity or a covariance from simulation) instead"
         )
-    cu, cd = _columns(model, "control"), _columns(model, "disturbance")
+    cu, cd = input_columns(model, "control"), input_columns(model, "disturbance")
     G = np.zeros((model.n_states, 0))
     if cu and inputs != "ignore":
         G = np.hstack([G, model.B[:, cu] @ _sqrt_or_eye(input_sqrt, len(cu), "input_sqrt")])
     if cd:
         G = np.hstack([G, model.B[:, cd] @ _sqrt_or_eye(disturbance_sqrt, len(cd), "disturbance_sqrt")])
-    S = solve_discrete_lyapunov(model.A, G @ G.T)
-    ev, V = np.linalg.eigh((S + S.T) / 2)
-    return V * np.sqrt(np.clip(ev, 0.0, None))
+    return _psd_sqrt(solve_discrete_lyapunov(model.A, G @ G.T))  # S = A S A' + G G'  (eq. 29)
 
 
 def design_block(
@@ -148,7 +137,7 @@ def design_block(
     else:
         M = _sqrt_or_eye(state_sqrt, model.n_states, "state_sqrt")
     cols = [observability_matrix(A, C, s) @ M]  # Z_q = O_q M_q  (eq. 14-15)
-    cu, cd = _columns(model, "control"), _columns(model, "disturbance")
+    cu, cd = input_columns(model, "control"), input_columns(model, "disturbance")
     noise_cols = list(cd) + (cu if inputs == "noise" else [])
     if noise_cols:  # H_q of unit-covariance noise (eq. 30)
         Sn = np.eye(len(noise_cols))
@@ -320,7 +309,7 @@ def robust_parity(
     T = np.hstack(blocks)  # T = [sqrt(a_1) R_1 ... sqrt(a_Q) R_Q]  (eq. 16, 35)
     N = T.shape[0]
     L = order_s + 1
-    cu = tuple(_columns(models[0], "control")) if inputs == "known" else ()
+    cu = tuple(input_columns(models[0], "control")) if inputs == "known" else ()
     scale = np.concatenate([
         np.tile(_positive(output_scale, models[0].n_outputs, "output_scale"), L),
         np.tile(_positive(input_scale, len(cu), "input_scale"), L) if cu else np.zeros(0),
@@ -333,8 +322,7 @@ def robust_parity(
     sigma = np.concatenate([np.zeros(N - k), sv[::-1]])
     ny = (order_s + 1) * models[0].n_outputs
     if n_relations is None:
-        O = observability_matrix(models[0].A, models[0].C, order_s)
-        n_relations = ny - int(np.linalg.matrix_rank(O))
+        n_relations = parity_basis(observability_matrix(models[0].A, models[0].C, order_s)).shape[1]
         if n_relations < 1:
             raise DesignError(f"order s={order_s} gives no exact parity relation for models[0]; pass n_relations or raise order_s")
     if not 1 <= int(n_relations) <= N:
@@ -363,12 +351,12 @@ def make_robust_parity_detector(
     """Run the p most robust relations as a detector on the nominal ``model``'s trim point.
 
     ``cov_r`` defaults to the design's own average residual covariance ``P' T T' P`` (the
-    expected ``r r'`` over the model set, eq. 26), which gives a chi-square-like statistic.
+    expected ``r r'`` over the model set, eq. 26), which is ``diag(sigma_1^2 .. sigma_p^2)``
+    and gives a chi-square-like statistic.
     """
     P = design.P
-    if cov_r is None:
-        Ps = design.U[:, : design.n_relations]
-        cov_r = Ps.T @ design.T @ design.T.T @ Ps  # E[r r'] over the model set
+    if cov_r is None:  # E[r r'] = U_p' T T' U_p = diag(sigma_1^2 .. sigma_p^2)  (eq. 19-23)
+        cov_r = np.diag(design.sigma_sq[: design.n_relations])
     return WindowParityDetector(
         detector_id=detector_id, order_s=design.order_s, proj_y=P[: design.n_y].T, proj_u=P[design.n_y:].T,
         known_inputs=design.known_inputs, u0=model.u0, y0=model.y0, cov_r=cov_r, threshold=threshold,
@@ -509,17 +497,17 @@ def example_icing_models(etas: Sequence[float] = (0.0, 0.05, 0.1), dt_s: float =
     elevator and throttle (control) and a vertical gust (disturbance); outputs the four states
     and the normal acceleration az. Zero-order hold at ``dt_s``.
     """
-    g, U0 = 9.81, 70.0
+    g_mps2, u_trim_mps = 9.81, 70.0
     out = []
     for eta in etas:
         Xu, Xa, Xth = -0.045 * (1 + 3.0 * eta), 6.0, 2.5
         Zu, Za, Zde = -0.28, -115.0 * (1 - 0.8 * eta), -6.0 * (1 - 1.0 * eta)
         Ma, Mq, Mde = -4.5 * (1 - 1.0 * eta), -2.2 * (1 - 0.5 * eta), -9.0 * (1 - 1.0 * eta)
-        A = np.array([[Xu, Xa, 0, -g], [Zu / U0, Za / U0, 1, 0], [0, Ma, Mq, 0], [0, 0, 1, 0]])
-        B = np.array([[0, Xth, 0], [Zde / U0, 0, Za / U0**2], [Mde, 0, Ma / U0], [0, 0, 0]])
+        A = np.array([[Xu, Xa, 0, -g_mps2], [Zu / u_trim_mps, Za / u_trim_mps, 1, 0], [0, Ma, Mq, 0], [0, 0, 1, 0]])
+        B = np.array([[0, Xth, 0], [Zde / u_trim_mps, 0, Za / u_trim_mps**2], [Mde, 0, Ma / u_trim_mps], [0, 0, 0]])
         C = np.vstack([np.eye(4), [Zu, Za, 0, 0]])
         D = np.zeros((5, 3))
-        D[4] = [Zde, 0, Za / U0]
+        D[4] = [Zde, 0, Za / u_trim_mps]
         m = LinearModel(A=A, B=B, C=C, D=D, state_names=("u_mps", "alpha_rad", "q_radps", "theta_rad"),
                         input_names=("elevator_rad", "throttle_norm", "wgust_mps"),
                         output_names=("u_mps", "alpha_rad", "q_radps", "theta_rad", "az_mps2"),

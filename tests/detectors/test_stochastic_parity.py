@@ -6,9 +6,10 @@ import pytest
 from scipy.special import erfc
 from scipy.stats import binom, chi2
 
-from fdi_sim.detectors.parity import AdditiveFaults, observability_matrix
+from fdi_sim.decision.chi2 import chi2_threshold
+from fdi_sim.detectors.parity import AdditiveFaults, ParitySpace, observability_matrix
 from fdi_sim.detectors.stochastic_parity import (
-    chi2_threshold,
+    StochasticParity,
     incorrect_diagnosis_matrix,
     isolate_by_angle,
     isolation_rates,
@@ -77,7 +78,6 @@ def test_normalized_residual_is_white_and_chi_square():
     rb = d.residual(Y, U)
     np.testing.assert_allclose(np.cov(rb.T), np.eye(d.n_residuals), atol=0.05)  # se ~ 0.01
     h = chi2_threshold(d.n_residuals, 0.05)
-    assert h == pytest.approx(chi2.ppf(0.95, d.n_residuals))
     k = int(np.sum(np.einsum("ij,ij->i", rb, rb) > h))
     lo, hi = binom.ppf([0.0005, 0.9995], 20000, 0.05)  # 99.9 % binomial band
     assert lo <= k <= hi
@@ -96,21 +96,17 @@ def test_fault_vector_is_the_mean_shift_of_a_constant_fault():
 
 
 def test_algorithm2_paper_erfc_and_two_fault_monte_carlo():
-    """Eq. 14 with the paper's erfc (2 x Gaussian tail) equals norm.sf; for two equal-norm faults
-    it is the exact probability that angle isolation picks the wrong one."""
-    from fdi_sim.detectors.stochastic_parity import StochasticParity
-
-    x = np.linspace(0, 3, 7)
-    from scipy.stats import norm
-
-    np.testing.assert_allclose(0.5 * 2 * norm.sf(x), 0.5 * erfc(x / np.sqrt(2)))  # paper erfc(x) = erfc_std(x/sqrt 2)
+    """Eq. 14 with the paper's erfc(x) = 2 int_x^inf N(0,1) pdf = erfc_std(x / sqrt 2); for two equal-norm
+    faults it is the exact probability that angle isolation picks the wrong one."""
     th = 0.5
     mu = np.array([[2.0, 0.0], [2 * np.cos(th), 2 * np.sin(th)]])
-    d = StochasticParity(order_s=0, W=np.eye(2), W_bar=np.eye(2), H_u=np.zeros((2, 0)), S=np.eye(2), mu_bar=mu,
-                         fault_names=("a", "b"), detectable=np.array([True, True]), known_inputs=())
+    space = ParitySpace(order_s=0, W=np.eye(2), O=np.zeros((2, 1)), H=np.zeros((2, 0)), known_inputs=())
+    d = StochasticParity(space=space, S=np.eye(2), W_bar=np.eye(2), mu_bar=mu, fault_names=("a", "b"),
+                         detectable=np.array([True, True]))
     P = incorrect_diagnosis_matrix(d, 1.5).P
-    # distance of m mu_j to the bisector through the origin is m |mu| sin(th/2)
-    assert P[1, 0] == pytest.approx(norm.sf(1.5 * 2 * np.sin(th / 2)), rel=1e-12)
+    # distance of m mu_j to the bisector through the origin is m |mu| sin(th/2); 1/2 erfc_paper(x) of eq. 14
+    x = 1.5 * 2 * np.sin(th / 2)
+    assert P[1, 0] == pytest.approx(0.5 * erfc(x / np.sqrt(2)), rel=1e-12)
     assert P[0, 1] == pytest.approx(P[1, 0]) and P[0, 0] == pytest.approx(1 - P[1, 0])
     rng = np.random.default_rng(13)
     r = 1.5 * mu[0] + rng.standard_normal((40000, 2))
@@ -126,6 +122,9 @@ def test_isolation_reject_option_and_undetectable():
     assert iso.index == 0 and np.isnan(iso.angles_rad[2])
     assert isolate_by_angle(np.array([1.0, 1.0]), mu, det, reject_angle_rad=0.5).index is None  # 45 deg > 0.5 rad
     assert isolate_by_angle(np.array([1.0, 1.0]), mu, det, reject_angle_rad=0.8).index in (0, 1)
+    zero = isolate_by_angle(np.zeros(2), mu, det)  # a zero residual has no direction
+    assert zero.index is None and np.all(np.isnan(zero.angles_rad))
+    assert isolate_by_angle(np.array([1.0, 0.1]), mu, [False, False, False]).index is None
     rates = isolation_rates(np.array([[3.0, 3.1], [0.1, 0.0]]), mu, det, threshold=1.0, reject_angle_rad=0.5)
     np.testing.assert_allclose(rates, [0, 0, 0, 0.5])  # one alarm, rejected; one below threshold
 
@@ -175,5 +174,6 @@ def test_bad_noise_models_are_refused():
         stochastic_parity(m, 2, f, -np.eye(3))
     with pytest.raises(DesignError, match="order_s >= 1"):
         stochastic_parity(m, 0, f, np.eye(3))
+    d = stochastic_parity(m, 2, f, np.eye(3))
     with pytest.raises(DesignError, match=r"\(0, 1\)"):
-        chi2_threshold(3, 1.5)
+        make_stochastic_parity_detector(m, d, p_false_alarm=1.5)
