@@ -18,7 +18,7 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")  # silence the banner before the firs
 import jsbsim  # noqa: E402
 
 from fdi_sim.aircraft.overlays import jsbsim_root  # noqa: E402
-from fdi_sim.aircraft.properties import property_map  # noqa: E402
+from fdi_sim.aircraft.properties import SurfaceSpec, property_map, surfaces  # noqa: E402
 from fdi_sim.errors import FdiSimError  # noqa: E402
 from fdi_sim.units import FPS_PER_KT  # noqa: E402
 
@@ -63,6 +63,46 @@ class Atmosphere:
     wind_speed_kts: float = 0.0
 
 
+def iced_model_name(name: str) -> str:
+    """JSBSim model name of the icing overlay of ``name`` (built by :mod:`fdi_sim.aircraft.icing`)."""
+    return f"{name}_iced"
+
+
+class SurfaceHandle:
+    """Takes a control surface away from the FCS (JSBSIM_NOTES sec. 3.4, the WRITE-attribute trick).
+
+    While held, the FCS's writes to the position nodes fail silently, so the aero model flies the
+    value given to :meth:`hold`. The FCS keeps computing the healthy position in its component's
+    own node (:meth:`healthy`); a value set before ``run()`` from the healthy value of the last
+    frame lags the healthy actuator by one step.
+    """
+
+    def __init__(self, spec: SurfaceSpec, nodes: list, healthy: object) -> None:
+        self.spec = spec
+        self._nodes = nodes
+        self._healthy = healthy.get_double_value
+        self.position = nodes[0].get_double_value  # the value the aero model flies [rad]
+        self.held = False
+
+    def healthy(self) -> float:
+        """Position the healthy FCS commands now [rad]."""
+        return self._healthy()
+
+    def hold(self, value_rad: float) -> None:
+        """Fly ``value_rad`` [rad] until the next call or :meth:`release`."""
+        for n in self._nodes:
+            n.set_attribute(jsbsim.Attribute.WRITE, True)
+            n.set_double_value(value_rad)
+            n.set_attribute(jsbsim.Attribute.WRITE, False)
+        self.held = True
+
+    def release(self) -> None:
+        """Give the surface back to the FCS (it writes the healthy value from the next step on)."""
+        for n in self._nodes:
+            n.set_attribute(jsbsim.Attribute.WRITE, True)
+        self.held = False
+
+
 class Aircraft:
     """A JSBSim aircraft ready to trim and fly.
 
@@ -72,17 +112,23 @@ class Aircraft:
         ``"f16"`` or ``"DHC6"``.
     dt_s : float
         Integration step [s] (JSBSim's default is 1/120 s).
+    icing : bool
+        Load the icing overlay (:func:`iced_model_name`): the same model with every iced aero
+        coefficient scaled by ``1 + eta k`` through the properties ``icing/eta`` and
+        ``icing/k-<coefficient>``; with ``eta = 0`` it flies as the clean model.
     """
 
-    def __init__(self, name: str, dt_s: float = 1.0 / 120.0) -> None:
+    def __init__(self, name: str, dt_s: float = 1.0 / 120.0, *, icing: bool = False) -> None:
         if name not in AIRCRAFT:
             raise UnknownAircraftError(f"unknown aircraft {name!r}; known: {', '.join(AIRCRAFT)}")
         self.name = name
+        self.icing = bool(icing)
         self.dt_s = float(dt_s)
         self.fdm = jsbsim.FGFDMExec(str(jsbsim_root()))
         self.fdm.set_debug_level(0)
-        if not self.fdm.load_model(name):
-            raise UnknownAircraftError(f"JSBSim could not load {name!r}")
+        model = iced_model_name(name) if icing else name
+        if not self.fdm.load_model(model):
+            raise UnknownAircraftError(f"JSBSim could not load {model!r}")
         self.fdm.set_dt(self.dt_s)
         self.n_engines = self.fdm.get_propulsion().get_num_engines()
         self._pm = self.fdm.get_property_manager()
@@ -162,6 +208,58 @@ class Aircraft:
                     t(th)
 
         return write
+
+    # ------------------------------------------------------------------ fault injection
+    def surface(self, target: str) -> SurfaceHandle:
+        """A handle that can hold one control surface (``"elevator"``, ``"aileron"``, ``"rudder"``)."""
+        specs = surfaces(self.name)
+        if target not in specs:
+            raise KeyError(f"{self.name} has no surface {target!r}; it has {', '.join(specs)}")
+        spec = specs[target]
+        return SurfaceHandle(spec, [self.node(p) for p in spec.positions], self.node(spec.healthy))
+
+    def set_engine_cutoff(self, engine: int, cutoff: bool) -> None:
+        """Cut the fuel of one engine (flame-out) or restore it and relight at once.
+
+        JSBSim's cutoff acts on ``propulsion/active_engine`` (-1 = all), so one engine is selected
+        for the write and the selection restored.
+        """
+        fdm = self.fdm
+        fdm["propulsion/active_engine"] = int(engine)
+        fdm["propulsion/cutoff_cmd"] = 1 if cutoff else 0
+        if not cutoff:
+            fdm["propulsion/starter_cmd"] = 1
+            fdm[f"propulsion/engine[{engine}]/set-running"] = 1
+        fdm["propulsion/active_engine"] = -1
+
+    def thrust_scaler(self, engine: int) -> Callable[[float], None] | None:
+        """A closure ``set(fraction)`` scaling the thrust of one engine, or None if the model has none.
+
+        Direct (jet) thrusters apply ``thrust cos(reverser angle)`` along the engine axis
+        (FGThruster), so ``fraction = cos(angle)`` is an exact thrust multiplier. Propellers ignore
+        the reverser angle (measured on the DHC-6): None.
+        """
+        if self.name != "f16":
+            return None
+        set_angle = self.node(f"propulsion/engine[{engine}]/reverser-angle-rad").set_double_value
+
+        def set_fraction(fraction: float) -> None:
+            set_angle(float(np.arccos(min(max(fraction, 0.0), 1.0))))
+
+        return set_fraction
+
+    def icing_writer(self) -> Callable[[float], None]:
+        """A closure ``set(eta)`` of the icing severity (icing overlay only)."""
+        if not self.icing:
+            raise FdiSimError(f"{self.name} was loaded without the icing overlay: use Aircraft({self.name!r}, icing=True)")
+        return self.node("icing/eta").set_double_value
+
+    def set_icing_k(self, k: dict[str, float]) -> None:
+        """Set the icing factors ``icing/k-<coefficient>`` (e.g. ``{"CmDe": -1.48}``)."""
+        if not self.icing:
+            raise FdiSimError(f"{self.name} was loaded without the icing overlay")
+        for name, value in k.items():
+            self.node(f"icing/k-{name}").set_double_value(float(value))
 
     # ------------------------------------------------------------------ atmosphere and stepping
     def set_atmosphere(self, atm: Atmosphere, seed: int) -> None:

@@ -5,6 +5,7 @@ different properties on each aircraft (the DHC-6 aero model reads the *left* ail
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from types import MappingProxyType
 
 # name -> JSBSim property, common to both aircraft
@@ -87,6 +88,69 @@ COMMAND_SIGNALS: tuple[str, ...] = ("elevator_cmd_norm", "aileron_cmd_norm", "ru
 SURFACE_SIGNALS: tuple[str, ...] = (
     "elevator_pos_rad", "aileron_pos_rad", "rudder_pos_rad", "throttle_pos_norm", "thrust_lbf", "flaps_pos_rad",
 )
+
+
+@dataclass(frozen=True)
+class SurfaceSpec:
+    """A control surface the fault injector can take over (JSBSIM_NOTES sec. 3.2, 3.4).
+
+    Attributes
+    ----------
+    target : str
+        Fault target name (``"elevator"``, ``"aileron"``, ``"rudder"``).
+    positions : tuple of str
+        JSBSim nodes the aero model reads for this surface; a fault holds all of them.
+    healthy : str
+        The FCS component's own node: the position a healthy actuator would give [rad].
+    min_deg, max_deg : float
+        Travel stops, from the model's ``aerosurface_scale`` range [deg].
+    rate_degps : float
+        Fastest travel of the healthy actuator [deg/s]: the model's kinematic traverse time
+        where it has one, otherwise a documented typical value (see ``source``).
+    source : str
+        Where the numbers come from.
+    """
+
+    target: str
+    positions: tuple[str, ...]
+    healthy: str
+    min_deg: float
+    max_deg: float
+    rate_degps: float
+    source: str
+
+
+# F-16 (f16.xml, Flight Control): elevator kinematic -1..1 in 0.3 s on +-0.436 rad -> 167 deg/s;
+# rudder -1..1 in 0.4 s on +-0.524 rad -> 150 deg/s; the aileron has no kinematic in the model: 80 deg/s
+# is the aileron rate limit used with the NASA F-16 data in Stevens & Lewis, Aircraft Control and
+# Simulation (2nd ed., sec. 4.x; elevator 60, aileron 80, rudder 120 deg/s) -- an assumption.
+# DHC-6 (Systems/Conventional Controls.xml): cable-driven, no actuator model; 30 deg/s is the
+# documented assumption for a runaway autopilot servo or a jammed-then-released cable.
+SURFACES: dict[str, dict[str, SurfaceSpec]] = {
+    "f16": {
+        "elevator": SurfaceSpec("elevator", ("fcs/elevator-pos-rad",), "fcs/elevator-position", -25.0, 25.0, 167.0,
+                                "f16.xml fcs/elevator-position range +-0.436 rad, kinematic 0.3 s"),
+        "aileron": SurfaceSpec("aileron", ("fcs/aileron-pos-rad",), "fcs/aileron-control", -21.5, 21.5, 80.0,
+                               "f16.xml fcs/aileron-control range +-0.375 rad; rate assumed (Stevens & Lewis)"),
+        "rudder": SurfaceSpec("rudder", ("fcs/rudder-pos-rad",), "fcs/rudder-control", -30.0, 30.0, 150.0,
+                              "f16.xml fcs/rudder-control range +-0.524 rad, kinematic 0.4 s"),
+    },
+    "DHC6": {
+        "elevator": SurfaceSpec("elevator", ("fcs/elevator-pos-rad",), "fcs/elevator-control", -26.0, 14.0, 30.0,
+                                "Conventional Controls.xml Elevator Control range -0.454..0.244 rad; rate assumed"),
+        # the aero model reads the left aileron as the roll-channel deflection; both are held
+        "aileron": SurfaceSpec("aileron", ("fcs/left-aileron-pos-rad", "fcs/right-aileron-pos-rad"),
+                               "fcs/left-aileron-control", -16.0, 18.9, 30.0,
+                               "Conventional Controls.xml Left Aileron Control range -0.28..0.33 rad; rate assumed"),
+        "rudder": SurfaceSpec("rudder", ("fcs/rudder-pos-rad",), "fcs/rudder-control", -16.0, 16.0, 30.0,
+                              "Conventional Controls.xml Rudder Control range +-0.28 rad; rate assumed"),
+    },
+}
+
+
+def surfaces(aircraft: str) -> dict[str, SurfaceSpec]:
+    """The fault-injectable surfaces of an aircraft, by target name."""
+    return SURFACES["DHC6" if aircraft.startswith("DHC6") else aircraft]
 
 
 def property_map(aircraft: str) -> MappingProxyType[str, str | tuple[str, ...]]:
