@@ -148,6 +148,10 @@ SURFACES: dict[str, dict[str, SurfaceSpec]] = {
 }
 
 
+#: number of engines (fault targets ``engine_0`` ...)
+ENGINE_COUNT: dict[str, int] = {"f16": 1, "DHC6": 2}
+
+
 def surfaces(aircraft: str) -> dict[str, SurfaceSpec]:
     """The fault-injectable surfaces of an aircraft, by target name."""
     return SURFACES["DHC6" if aircraft.startswith("DHC6") else aircraft]

@@ -33,14 +33,17 @@ from fdi_sim.flightlog.repair import RepairReport, repair_log
 from fdi_sim.flightlog.schemas import (
     ALARM_JSON_SCHEMA,
     FAILURE_LOG_JSON_SCHEMA,
+    FAULT_EVENT_JSON_SCHEMA,
     METADATA_SCENARIO,
     STATUS_JSON_SCHEMA,
     TOPIC_COMMANDS,
+    TOPIC_FAULT_EVENTS,
     TOPIC_FAULTS,
     TOPIC_FDI_ALARMS,
     TOPIC_FDI_FAILURE_LOG,
     TOPIC_OPERATING_POINT,
     TOPIC_SENSORS,
+    TOPIC_SENSORS_VALID,
     TOPIC_SIM_STATUS,
     TOPIC_SURFACES,
     TOPIC_TRUTH_STATE,
@@ -53,7 +56,7 @@ from fdi_sim.flightlog.schemas import (
 from fdi_sim.flightlog.writer import EventChannel, FlightLogWriter, VectorChannel
 
 __all__ = [
-    "ALARM_JSON_SCHEMA", "FAILURE_LOG_JSON_SCHEMA", "METADATA_SCENARIO", "STATUS_JSON_SCHEMA",
+    "ALARM_JSON_SCHEMA", "FAILURE_LOG_JSON_SCHEMA", "FAULT_EVENT_JSON_SCHEMA", "TOPIC_FAULT_EVENTS", "TOPIC_SENSORS_VALID", "METADATA_SCENARIO", "STATUS_JSON_SCHEMA",
     "TOPIC_COMMANDS", "TOPIC_FAULTS", "TOPIC_FDI_ALARMS", "TOPIC_FDI_FAILURE_LOG", "TOPIC_OPERATING_POINT", "TOPIC_SENSORS",
     "TOPIC_SIM_STATUS", "TOPIC_SURFACES", "TOPIC_TRUTH_STATE",
     "Event", "EventChannel", "EventSchema", "EventTopic", "FlightLog", "FlightLogWriter", "LogInfo",

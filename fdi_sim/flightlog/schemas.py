@@ -46,6 +46,8 @@ TOPIC_OPERATING_POINT: str = "/truth/operating_point"
 TOPIC_COMMANDS: str = "/commands/pilot"
 TOPIC_SENSORS: str = "/sensors/measurements"
 TOPIC_FAULTS: str = "/faults/active"
+TOPIC_FAULT_EVENTS: str = "/faults/events"
+TOPIC_SENSORS_VALID: str = "/sensors/valid"
 TOPIC_FDI_ALARMS: str = "/fdi/alarms"
 TOPIC_FDI_FAILURE_LOG: str = "/fdi/failure_log"
 TOPIC_SIM_STATUS: str = "/sim/status"
@@ -309,4 +311,14 @@ STATUS_JSON_SCHEMA: dict[str, Any] = _object_schema(
     "fdi-sim run status", ["status"],
     status={"type": "string"},
     message={"type": "string"},
+)
+
+#: ``/faults/events``: the fault catalogue at t = 0, then each onset and clear of a fault window
+FAULT_EVENT_JSON_SCHEMA: dict[str, Any] = _object_schema(
+    "fdi-sim fault event", ["event"],
+    event={"type": "string", "enum": ["catalog", "onset", "clear"]},
+    label={"type": "string", "description": "fault label (prefix of its fields on /faults/active)"},
+    type={"type": "string", "description": "registry id of the fault"},
+    target={"type": "string", "description": "surface, throttle, engine_<i>, sensor name or airframe"},
+    faults={"type": "array", "description": "catalog: every fault with its parameters and on-windows [s]"},
 )

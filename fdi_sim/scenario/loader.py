@@ -153,6 +153,9 @@ def _cross_checks(sc: Scenario) -> None:
     m = sc.model
     if m.aircraft == "f16" and m.initial.flaps_deg:
         raise ScenarioError(sc.source, "initial.flaps_deg", "the F-16 has no pilot flaps", "remove initial.flaps_deg")
+    from fdi_sim.faults.check import check_faults
+
+    check_faults(sc)
     for i, (tid, p) in enumerate(sc.maneuvers):
         t0 = getattr(p, "t_start_s", 0.0)
         if t0 >= m.duration_s:

@@ -8,7 +8,9 @@ log is closed in ``finally`` in every case, so it is always readable.
 """
 from __future__ import annotations
 
+import dataclasses
 import importlib.metadata
+import json
 import math
 import platform
 import sys
@@ -22,11 +24,16 @@ import numpy as np
 from fdi_sim import registry
 from fdi_sim.aircraft import COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, trim
 from fdi_sim.errors import LogError, ScenarioError, SimulationDiverged
+from fdi_sim.faults.injector import FaultInjector
 from fdi_sim.flightlog import (
+    FAULT_EVENT_JSON_SCHEMA,
     STATUS_JSON_SCHEMA,
     TOPIC_COMMANDS,
+    TOPIC_FAULT_EVENTS,
+    TOPIC_FAULTS,
     TOPIC_OPERATING_POINT,
     TOPIC_SENSORS,
+    TOPIC_SENSORS_VALID,
     TOPIC_SIM_STATUS,
     TOPIC_SURFACES,
     TOPIC_TRUTH_STATE,
@@ -161,7 +168,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     # one stream per component; the fault and FDI streams are spawned now so that adding faults or
     # detectors to a scenario never changes the sensor noise or the turbulence of the same seed
     seeds = np.random.SeedSequence(sc.seed)
-    ss_sensors, ss_pilot, ss_jsbsim, _ss_faults, _ss_fdi = seeds.spawn(5)
+    ss_sensors, ss_pilot, ss_jsbsim, ss_faults, _ss_fdi = seeds.spawn(5)
     jsbsim_seed = int(ss_jsbsim.generate_state(1)[0] % (2**31 - 1))
     metadata = {
         "scenario": {"name": sc.name, "seed": str(sc.seed), "source": sc.source, "text": sc.text, "json": sc.to_json(),
@@ -180,13 +187,25 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     tr = None
     wall0 = time.perf_counter()
     try:
-        ac = Aircraft(sc.aircraft, sc.dt_s)
+        fault_defs = [registry.get("fault", tid).factory(p) for tid, p in sc.faults]
+        ac = Aircraft(sc.aircraft, sc.dt_s, icing=any(d.family == "airframe" for d in fault_defs))
         ac.set_atmosphere(Atmosphere(), jsbsim_seed)
-        tr = trim(ac, sc.operating_point())
-        m = sc.model
-        ac.set_atmosphere(Atmosphere(m.atmosphere.turbulence, m.atmosphere.wind_from_deg, m.atmosphere.wind_speed_kts), jsbsim_seed)
         sensors = build_sensors(sc, sc.dt_s)
         sensors.reset(np.random.default_rng(ss_sensors))
+        injector = None
+        op = sc.operating_point()
+        if fault_defs:
+            injector = FaultInjector(fault_defs, ac, sensors.names, [s.rate_hz for s in sensors.specs], TRUTH_SIGNALS,
+                                     sc.dt_s, sc.duration_s)
+            injector.reset(np.random.default_rng(ss_faults))
+            eta0 = injector.initial_icing_eta()
+            if eta0:  # iced from the start: trim with the ice on
+                ac.icing_writer()(eta0)
+                op = dataclasses.replace(op, icing_eta=eta0)
+            writer.add_metadata("faults", {"catalog": json.dumps(injector.catalog())})
+        tr = trim(ac, op)
+        m = sc.model
+        ac.set_atmosphere(Atmosphere(m.atmosphere.turbulence, m.atmosphere.wind_from_deg, m.atmosphere.wind_speed_kts), jsbsim_seed)
         pilot = build_pilot(sc, tr, sensors.names)
         pilot.reset(np.random.default_rng(ss_pilot))
         ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + TRUTH_SIGNALS)
@@ -196,7 +215,16 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         ch_meas = writer.add_vector_channel(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
         ch_status = writer.add_event_channel(TOPIC_SIM_STATUS, "fdi_sim/msg/SimStatus", STATUS_JSON_SCHEMA)
         ch_status.write(0.0, {"status": "running", "message": f"trimmed ({tr.method} trim), flying"})
-        status, reason, t_s, k, stats = _loop(sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress)
+        fault_channels = None
+        if injector is not None:
+            fault_channels = (
+                writer.add_vector_channel(TOPIC_FAULTS, "fdi_sim/msg/FaultTruth", ("t_s",) + injector.truth_fields),
+                writer.add_event_channel(TOPIC_FAULT_EVENTS, "fdi_sim/msg/FaultEvent", FAULT_EVENT_JSON_SCHEMA),
+                writer.add_vector_channel(TOPIC_SENSORS_VALID, "fdi_sim/msg/SensorValid", ("t_s",) + sensors.names)
+                if injector.has_dropout else None,
+            )
+        status, reason, t_s, k, stats = _loop(sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress,
+                                              injector, fault_channels)
         ch_status.write(t_s, {"status": status, "message": reason})
     finally:
         writer.close()
@@ -210,9 +238,11 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     return RunResult(log_path=out, status=status, summary=summary)
 
 
-def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channels: tuple, progress: bool | None):
+def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channels: tuple, progress: bool | None,
+          inj: FaultInjector | None = None, fault_channels: tuple | None = None):
     """The per-step loop; returns (status, reason, last t_s, steps, max deviations)."""
     ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
+    ch_ftruth, ch_fevents, ch_valid = fault_channels if fault_channels else (None, None, None)
     read_truth = ac.reader(TRUTH_SIGNALS)
     read_surf = ac.reader(SURFACE_SIGNALS)
     write_cmd = ac.command_writer()
@@ -235,6 +265,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     status, reason = "completed", ""
     k = 0
     t_s = 0.0
+    eta = 0.0
     last_shown = 0
     try:
         for k in range(n_steps + 1):
@@ -254,9 +285,19 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 raise SimulationDiverged(t_s, f"body rate beyond {rate_max} rad/s")
             if x[i_vc] < vc_min:
                 raise SimulationDiverged(t_s, f"airspeed {x[i_vc]:.1f} kt below {vc_min}")
-            meas = sensors.step(t_s, x)
-            cmd = pilot.step(t_s, meas.y)
-            write_cmd(cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm)
+            y = sensors.step(t_s, x).y
+            if inj is None:
+                cmd = pilot.step(t_s, y)
+                write_cmd(cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm)
+            else:  # faults: sensors -> pilot -> commands -> plant (surfaces, engines, icing)
+                inj.begin_step(t_s)
+                y = inj.sensors(t_s, k, y, x)
+                cmd = pilot.step(t_s, y)
+                write_cmd(*inj.commands(t_s, cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm,
+                                        cmd.throttle_cmd_norm))
+                inj.after_commands()
+                inj.plant(t_s, x)
+                eta = inj.icing_eta
             # --- statistics: deviation from the references (airspeed relative to the steady air) --
             v_air = math.sqrt((x[i_vn] - wn) ** 2 + (x[i_ve] - we) ** 2 + x[i_vd] ** 2)
             dv = abs(x[i_vc] * v_air / x[i_vt] - cmd.vc_ref_kts)
@@ -270,10 +311,17 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 max_dphi = dphi
             # --- log ------------------------------------------------------------------------
             ch_truth.write(t_s, x)
-            ch_meas.write(t_s, meas.y)
+            ch_meas.write(t_s, y)
+            if inj is not None:
+                ch_ftruth.write(t_s, inj.truth_row())
+                if inj.events:
+                    for te, ev in inj.pop_events():
+                        ch_fevents.write(te, ev)
+                if ch_valid is not None:
+                    ch_valid.write(t_s, inj.valid)
             ch_cmd.write(t_s, (cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm,
                                cmd.h_ref_ft, cmd.vc_ref_kts, cmd.psi_ref_rad, cmd.phi_ref_rad))
-            ch_op.write(t_s, (x[i_h], x[i_vc], x[i_mach], x[i_alpha], flaps_deg, 0.0))
+            ch_op.write(t_s, (x[i_h], x[i_vc], x[i_mach], x[i_alpha], flaps_deg, eta))
             if k == n_steps:
                 break
             if not ac.step():

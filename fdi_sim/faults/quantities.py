@@ -1,0 +1,66 @@
+"""Fault magnitudes carry their unit in their key, in any unit of the target's dimension.
+
+A fault on ``alpha_rad`` may give ``bias_deg = 2`` or ``bias_rad = 0.035``; a drift on ``vc_kts``
+``drift_ktps = 0.1`` (a rate: the target's unit per second); a stuck elevator ``position_deg = -5``;
+a throttle ``position_norm = 0.2``. The magnitude is converted here to the target's native unit
+(the unit of its signal name: rad for surfaces, norm for the throttle, the sensor's suffix).
+"""
+from __future__ import annotations
+
+import math
+
+# dimension -> {unit: factor to the dimension's base unit}
+_DIMENSIONS: dict[str, dict[str, float]] = {
+    "angle": {"rad": 1.0, "deg": math.pi / 180.0},
+    "angular_rate": {"radps": 1.0, "degps": math.pi / 180.0},
+    "angular_acceleration": {"radps2": 1.0, "degps2": math.pi / 180.0},
+    "length": {"ft": 1.0, "m": 1.0 / 0.3048},
+    "speed": {"fps": 1.0, "kts": 1.6878098571, "mps": 1.0 / 0.3048},
+    "acceleration": {"fps2": 1.0, "ktps": 1.6878098571, "mps2": 1.0 / 0.3048, "g": 32.174049},
+    "jerk": {"fps3": 1.0, "gps": 32.174049},
+    "normalized": {"norm": 1.0},
+    "normalized_rate": {"normps": 1.0},
+    "mach": {"mach": 1.0},
+    "mach_rate": {"machps": 1.0},
+    "pressure": {"psf": 1.0},
+    "pressure_rate": {"psfps": 1.0},
+    "eta": {"eta": 1.0},
+}
+_RATE_OF: dict[str, str] = {
+    "angle": "angular_rate", "angular_rate": "angular_acceleration", "length": "speed", "speed": "acceleration",
+    "acceleration": "jerk", "normalized": "normalized_rate", "mach": "mach_rate", "pressure": "pressure_rate",
+}
+_UNIT_DIM: dict[str, str] = {u: d for d, units in _DIMENSIONS.items() for u in units}
+
+
+def native_unit(signal: str) -> str:
+    """The unit of a signal from its name: ``q_radps`` -> ``radps``, ``mach`` -> ``mach``."""
+    unit = signal.rsplit("_", 1)[-1]
+    if unit not in _UNIT_DIM:
+        raise KeyError(f"signal {signal!r} has no known unit suffix")
+    return unit
+
+
+def allowed_units(native: str, rate: bool = False) -> tuple[str, ...]:
+    """Units a magnitude of a target in unit ``native`` may be given in (``rate``: per second)."""
+    dim = _UNIT_DIM[native]
+    if rate:
+        dim = _RATE_OF[dim]
+    return tuple(_DIMENSIONS[dim])
+
+
+def to_native(value: float, unit: str, native: str, rate: bool = False) -> float:
+    """Convert ``value`` [unit] to the target's native unit (or its rate, per second).
+
+    Raises
+    ------
+    ValueError
+        The unit is not of the right dimension; the message lists the allowed ones.
+    """
+    allowed = allowed_units(native, rate)
+    if unit not in allowed:
+        raise ValueError(f"unit {unit!r} does not fit a target in {native}{' per second' if rate else ''}; "
+                         f"use one of {', '.join(allowed)}")
+    # a rate dimension mirrors the factors of its base (kts 1.688 fps <-> ktps 1.688 fps/s), so the
+    # native factor is the native unit's factor in its own dimension in both cases
+    return value * _DIMENSIONS[_UNIT_DIM[unit]][unit] / _DIMENSIONS[_UNIT_DIM[native]][native]
