@@ -88,14 +88,23 @@ class TrimResult:
 def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
     """Trim ``ac`` at ``op``; the aircraft is left at the trimmed state, time 0.
 
+    With the icing overlay (``Aircraft(..., icing=True)``) ``icing/eta`` is set to
+    ``op.icing_eta`` first and stays at that value.
+
     Raises
     ------
     TrimError
         The point cannot be trimmed (reason says why: JSBSim's message, a control at its
-        limit, the residual reached).
+        limit, the residual reached), or ``op.icing_eta > 0`` on an aircraft loaded without
+        the icing overlay.
     """
     if op.aircraft != ac.name:
         raise TrimError(ac.name, op.label(), f"operating point is for {op.aircraft!r}")
+    if ac.icing:
+        ac.icing_writer()(op.icing_eta)  # the iced model trims at the point's eta (0 flies clean)
+    elif op.icing_eta:
+        raise TrimError(ac.name, op.label(), f"icing_eta = {op.icing_eta:g} needs the icing overlay: "
+                        f"load Aircraft({ac.name!r}, icing=True)")
     fdm = ac.fdm
     fdm["aero/alpha-min-rad"] = -0.25  # JSBSim searches alpha in [-5, 20] deg by default; flaps need less
     fdm["aero/alpha-max-rad"] = 0.35
@@ -126,9 +135,12 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
     else:
         fdm.get_propulsion().get_steady_state()  # avoid the N1 -> idle reset on the first step
         result = trim_running(ac, op, jsb_error)
-    if not result.residual < TRIM_TOL:
-        raise TrimError(ac.name, op.label(), f"residual {result.residual:.3g} above {TRIM_TOL} ({jsb_error or 'no JSBSim message'})")
     limit = _at_limit(result)
+    if not result.residual < TRIM_TOL:
+        # a control at its limit is the likely cause (e.g. the iced DHC-6 at 120 KIAS: throttle 1.0)
+        why = f"; best point: {limit}" if limit else ""
+        raise TrimError(ac.name, op.label(),
+                        f"residual {result.residual:.3g} above {TRIM_TOL} ({jsb_error or 'no JSBSim message'}){why}")
     if limit:
         raise TrimError(ac.name, op.label(), limit)
     return result
