@@ -337,7 +337,9 @@ class FaultInjector:
             if c.pop("onset", False):
                 c["p0"] = c["p"]
             v = actuator_value(f.law, c, t_s, f.t_on, th, c["p"], c["p0"], self.dt_s, 0.0)
-            v = min(max(th + w * (v - th), c["lo"]), c["hi"])
+            if w < 1.0:  # ramp-in: blend with the healthy value (exactly v at full level)
+                v = th + w * (v - th)
+            v = min(max(v, c["lo"]), c["hi"])
             f.error = v - th
             c["p"] = v
             th = v
@@ -374,7 +376,9 @@ class FaultInjector:
                     c["p0"] = p
                 flow = float(x[c["flow_i"]]) if c["flow_i"] is not None else 0.0
                 v = actuator_value(f.law, c, t_s, f.t_on, healthy, p, c["p0"], self.dt_s, flow)
-                v = min(max(healthy + w * (v - healthy), c["lo"]), c["hi"])
+                if w < 1.0:  # ramp-in: blend with the healthy value (exactly v at full level)
+                    v = healthy + w * (v - healthy)
+                v = min(max(v, c["lo"]), c["hi"])
                 h.hold(v)
                 f.error = v - healthy
             elif fam == "engine":
