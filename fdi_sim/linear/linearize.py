@@ -4,7 +4,7 @@ The state is ``[vt_fps alpha_rad beta_rad p_radps q_radps r_radps phi_rad theta_
 (plus ``n1_pct prop_rpm`` for the DHC-6 turboprops), the outputs are the sensor suite of
 :data:`~fdi_sim.aircraft.linearize_state.SENSOR_OUTPUTS` (so ``C`` and ``D`` hold the accelerometers
 and the air data), the inputs are the four pilot commands followed by the disturbance columns
-(body-axis gust velocities; ``icing_eta`` when the iced overlay exists).
+(body-axis gust velocities; ``icing_eta`` when the aircraft flies the icing overlay).
 
 ``Vt``, ``alpha`` and ``beta`` of the state are those of the Earth-relative body velocity, which
 equals the air-relative one at the (calm) trim. A gust therefore does not move the state directly;
@@ -165,9 +165,9 @@ def trim_summary(ac: Aircraft, tr: TrimResult) -> dict[str, float | str]:
 
 def overlay_problem(ac: Aircraft, op: OperatingPoint) -> str:
     """Why ``op`` cannot be flown on ``ac`` for lack of a model overlay, or ``""``."""
-    if op.icing_eta and not ac.fdm.get_property_manager().hasNode("icing/eta"):
-        return (f"icing overlay not available: JSBSim model {ac.name} has no icing/eta property, so "
-                f"eta = {op.icing_eta:g} cannot be flown (the iced DHC-6 overlay comes with the icing issue)")
+    if op.icing_eta and not ac.icing:
+        return (f"icing overlay not available: {ac.name} was loaded without it, so eta = {op.icing_eta:g} "
+                f"cannot be flown; load Aircraft({ac.name!r}, icing=True) (linearize_grid does for iced grids)")
     return ""
 
 
@@ -303,7 +303,9 @@ def linearize_grid(grid: GridSpec, settings: FDSettings | None = None, validate:
     -------
     ModelSchedule
         Every point ends up ``ok``, ``untrimmable`` (with the trim's reason) or ``skipped`` (with
-        the reason, e.g. no icing overlay): no silent skips.
+        the reason, e.g. an unknown aircraft): no silent skips. A grid with any ``icing_eta > 0``
+        is flown on the icing overlay (``Aircraft(name, icing=True)``, the trim sets eta per
+        point), and its models carry the ``icing_eta`` disturbance column.
 
     Raises
     ------
@@ -312,9 +314,12 @@ def linearize_grid(grid: GridSpec, settings: FDSettings | None = None, validate:
     """
     t_start = time.perf_counter()
     s = settings or FDSettings()
-    ac = Aircraft(grid.aircraft) if grid.aircraft in AIRCRAFT else None
+    # a grid with iced points flies every point on the icing overlay (eta = 0 flies exactly as the
+    # clean model), so all points share one signal set: the icing_eta disturbance column
+    iced = any(op.icing_eta for op in grid.points)
+    ac = Aircraft(grid.aircraft, icing=iced) if grid.aircraft in AIRCRAFT else None
     no_model = (f"overlay not available: JSBSim model {grid.aircraft!r} is not one of {', '.join(AIRCRAFT)} "
-                "(the iced DHC-6 overlay comes with the icing issue)")
+                "(icing is the icing_eta axis of a grid of one of these)")
     points: list[SchedulePoint] = []
     models: list[LinearModel] = []
     for i, op in enumerate(grid.points):
