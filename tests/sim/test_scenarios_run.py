@@ -16,12 +16,20 @@ SCENARIOS = sorted((Path(__file__).resolve().parents[2] / "scenarios").glob("*.t
 def test_scenario_flies(tmp_path: Path, path: Path) -> None:
     sc = load(path)
     sc = sc.replace(duration_s=min(sc.duration_s, 20.0),
-                    maneuvers=[m for m in sc.model.maneuvers if m.get("t_start_s", 0.0) < 20.0])
+                    maneuvers=[m for m in sc.model.maneuvers if m.get("t_start_s", 0.0) < 20.0],
+                    faults=[f for f in sc.model.faults if f.get("t_start_s", 0.0) < 20.0])
     res = run(sc, tmp_path, progress=False)
     assert res.status == "completed", res.summary.reason
     log = read_log(res.log_path)
     assert log.metadata["scenario"]["name"] == sc.name
     assert log.metadata["scenario"]["seed"] == str(sc.seed)
     n = round(sc.duration_s / sc.dt_s) + 1
-    for topic in ("/truth/state", "/commands/pilot", "/sensors/measurements", "/truth/operating_point"):
+    topics = ["/truth/state", "/commands/pilot", "/sensors/measurements", "/truth/operating_point"]
+    if sc.faults:
+        topics.append("/faults/active")
+        active = log.topics["/faults/active"]
+        for i, (_, p) in enumerate(sc.faults):  # every fault of the file acts during the shortened run
+            col = next(c for c in active.fields if c.endswith("_active") and active.fields.index(c) == 1 + 3 * i)
+            assert active[col].any(), col
+    for topic in topics:
         assert log.message_counts[topic] == n, topic
