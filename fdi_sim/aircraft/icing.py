@@ -40,13 +40,14 @@ from typing import Mapping
 
 import numpy as np
 
+from fdi_sim.aircraft.model import iced_model_name
 from fdi_sim.aircraft.overlays import GENERATORS
 from fdi_sim.errors import FdiSimError
 
 #: folder of the per-aircraft data files
 AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
-#: aircraft with an icing overlay -> JSBSim model name of the overlay (as ``model.iced_model_name``)
-ICED_MODELS: Mapping[str, str] = MappingProxyType({"DHC6": "DHC6_iced", "f16": "f16_iced"})
+#: aircraft with an icing overlay -> JSBSim model name of the overlay
+ICED_MODELS: Mapping[str, str] = MappingProxyType({n: iced_model_name(n) for n in ("DHC6", "f16")})
 #: the parts of an aero function a k can scale; ``T`` is the function's one table
 PARTS: Mapping[str, str] = MappingProxyType({
     "whole": "the whole function",
@@ -405,5 +406,10 @@ def build_f16_iced(wheel_root: Path, dst_root: Path) -> None:
     _build("f16", dst_root)
 
 
+# The overlay cache is keyed on this module's source, not yet on the data files: after editing an
+# icing.toml, delete the cache folder (overlays._cache_base()) or set FDI_SIM_CACHE elsewhere.
+# ``data_files`` names what a builder reads, for the cache key to include.
+build_dhc6_iced.data_files = (data_path("DHC6"),)  # type: ignore[attr-defined]
+build_f16_iced.data_files = (data_path("f16"),)  # type: ignore[attr-defined]
 GENERATORS[ICED_MODELS["DHC6"]] = build_dhc6_iced
 GENERATORS[ICED_MODELS["f16"]] = build_f16_iced
