@@ -212,6 +212,7 @@ class LogInfo:
     metadata_names: tuple[str, ...]
     scenario_name: str | None = None
     scenario_seed: str | None = None
+    faults: tuple[dict, ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -231,6 +232,12 @@ class LogInfo:
         for t in self.topics:
             lines.append(f"{t.topic:<{w_topic}}  {t.schema_name:<{w_schema}}  {t.message_count:>9d}")
         lines.append("metadata: " + (", ".join(self.metadata_names) if self.metadata_names else "(none)"))
+        for f in self.faults:
+            w = f.get("windows_s", [])
+            open_end = "t_end_s" not in f.get("params", {})
+            when = (f"{len(w)} windows from {w[0][0]:g} s" if len(w) > 1 else
+                    f"from {w[0][0]:g} s" if open_end else f"[{w[0][0]:g}, {w[0][1]:g}) s") if w else "never"
+            lines.append(f"fault:    {f.get('label')}  {f.get('type')} on {f.get('target')}, {when}")
         return "\n".join(lines)
 
 
@@ -458,7 +465,18 @@ def log_info(path: str | Path) -> LogInfo:
         end_t_s=0.0 if empty else stats.message_end_time / NS_PER_S,
         topics=topics, metadata_names=tuple(metadata),
         scenario_name=scenario.get("name"), scenario_seed=scenario.get("seed"),
+        faults=_fault_catalog(metadata),
     )
+
+
+def _fault_catalog(metadata: dict[str, dict[str, str]]) -> tuple[dict, ...]:
+    """The fault catalogue written by the simulation (``faults`` metadata record), if any."""
+    import json
+
+    try:
+        return tuple(json.loads(metadata.get("faults", {}).get("catalog", "[]")))
+    except (ValueError, TypeError):
+        return ()
 
 
 __all__ = ["Event", "EventTopic", "FlightLog", "LogInfo", "RawTopic", "TopicData", "TopicInfo",

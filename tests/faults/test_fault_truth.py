@@ -157,3 +157,14 @@ def test_overlapping_faults_on_one_target_are_refused() -> None:
         _load(a, b)
     _load(a, dict(b, t_start_s=10))  # back to back is fine
     _load(a, dict(b, target="p_radps"))  # another target is fine
+
+
+def test_info_lists_the_faults(tmp_path: Path) -> None:
+    from fdi_sim.flightlog import log_info
+
+    faults = [{"type": "sensor-bias-v1", "target": "q_radps", "bias_degps": 0.5, "t_start_s": 1.0, "t_end_s": 2.5},
+              {"type": "actuator-stuck-v1", "target": "rudder", "t_start_s": 2.0, "label": "jam"}]
+    run = fly(tmp_path, "DHC6", faults=faults, duration_s=3.0)
+    text = log_info(run["res"].log_path).format()
+    assert "q_radps_bias  sensor-bias-v1 on q_radps, [1, 2.5) s" in text
+    assert "jam  actuator-stuck-v1 on rudder, from 2 s" in text
