@@ -60,6 +60,9 @@ def _fingerprint() -> str:
         f = getattr(sys.modules.get(mod), "__file__", None)
         if f:
             h.update(Path(f).read_bytes())
+        # data a generator reads (e.g. aircraft/<name>/icing.toml): an edit must rebuild the root
+        for data in sorted(str(p) for p in getattr(gen, "data_files", ())):
+            h.update(Path(data).read_bytes() if Path(data).exists() else b"")  # contents only: clones share a root
     return h.hexdigest()[:16]
 
 
