@@ -1,6 +1,11 @@
-"""Nonlinear responses: JSBSim flown from a trim with input deviations added (the validation runs)."""
+"""Nonlinear responses: JSBSim flown from a trim with input deviations added (the validation runs).
+
+Also the one engine element a linear model cannot hold, identified from JSBSim at a trim: the
+asymmetric lag of the turboprop gas generator (:func:`identify_engine_lag`).
+"""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Mapping, Sequence
 
@@ -16,6 +21,92 @@ from fdi_sim.aircraft.properties import property_map
 from fdi_sim.errors import DesignError
 
 _PSI = BODY_STATES.index("psi_rad")
+
+
+@dataclass(frozen=True)
+class EngineLag:
+    """First-order lag of the gas-generator speed with different time constants up and down.
+
+    ``FGTurboProp::Run`` moves N1 toward ``IdleN1 + throttle N1_factor`` by ``ExpSeek``:
+    ``N1 <- target + (N1 - target) exp(-dt / tau)`` with ``tau = tau_up_s`` while N1 is below the
+    target and ``tau_down_s`` above it. The linear model's ``n1_pct`` row holds the mean of the two
+    rates (the central difference averages them); this object holds both, so the validation can fly
+    the exact lag in front of the linear model.
+
+    Attributes
+    ----------
+    tau_up_s : float
+        Time constant while N1 rises [s].
+    tau_down_s : float
+        Time constant while N1 falls [s].
+    state_name : str
+        The model state it drives.
+    input_name : str
+        The model input that sets its target.
+    """
+
+    tau_up_s: float
+    tau_down_s: float
+    state_name: str = "n1_pct"
+    input_name: str = "throttle_cmd_norm"
+
+
+def identify_engine_lag(ac: Aircraft, ts: TrimState, step_norm: float = 0.02) -> EngineLag | None:
+    """Identify the up and down time constants of N1 from JSBSim at the trim ``ts``.
+
+    From the trim, the throttle is stepped by ``+step_norm`` (then, from the trim again, by
+    ``-step_norm``) and held for three steps. With a constant target ``T``, ExpSeek gives
+    ``N1_{k+1} - T = r (N1_k - T)``, so ``r = (N1_2 - N1_1) / (N1_1 - N1_0)`` and
+    ``tau = -dt / ln r`` without knowing ``T``.
+
+    Parameters
+    ----------
+    ac : Aircraft
+        The aircraft (put back at the trim before each step; fuel frozen).
+    ts : TrimState
+        The trim.
+    step_norm : float
+        Throttle step [-].
+
+    Returns
+    -------
+    EngineLag or None
+        None for aircraft without a gas-generator state (no propeller: the F-16's F100 is
+        quasi-static in the linear model).
+
+    Raises
+    ------
+    DesignError
+        N1 did not follow the step as a first-order lag (engine not running, or at a limit).
+    """
+    if ts.n1_pct is None:
+        return None
+    fdm = ac.fdm
+    n1_props = [f"propulsion/engine[{i}]/n1" for i in range(ac.n_engines)]
+    throttles = [f"fcs/throttle-cmd-norm[{i}]" for i in range(ac.n_engines)]
+    freeze0 = fdm["propulsion/fuel_freeze"]
+    fdm["propulsion/fuel_freeze"] = 1
+    taus: list[float] = []
+    try:
+        for sign in (1.0, -1.0):
+            restore_trim(ac, ts)
+            for p in throttles:
+                fdm[p] = ts.u_cmd[CONTROL_INPUTS.index("throttle_cmd_norm")] + sign * step_norm
+            n1 = [float(np.mean([fdm[p] for p in n1_props]))]
+            for _ in range(3):
+                fdm.run()
+                n1.append(float(np.mean([fdm[p] for p in n1_props])))
+            d1, d2 = n1[2] - n1[1], n1[3] - n1[2]
+            r = d2 / d1 if d1 * sign > 0 else float("nan")
+            if not 0.0 < r < 1.0:
+                raise DesignError(f"{ac.name} at {ts.op.label()}: N1 did not follow a throttle step of "
+                                  f"{sign * step_norm:+g} as a first-order lag (N1 {n1}); is the engine running "
+                                  "and below its limits?")
+            taus.append(-ac.dt_s / math.log(r))
+    finally:
+        fdm["propulsion/fuel_freeze"] = freeze0
+        restore_trim(ac, ts)
+    return EngineLag(tau_up_s=taus[0], tau_down_s=taus[1])
 
 
 @dataclass(frozen=True, eq=False)

@@ -11,6 +11,19 @@ so each output is judged on the runs that excite it. The per-run, per-output mat
 well (``nrmse_pair``), with the response size (``rms_nl``) to tell a real error from noise on a
 barely excited pair.
 
+Engine lag (DHC-6)
+------------------
+The PT6A gas generator follows the throttle with a 1 s lag up and a 2.4 s lag down
+(``FGTurboProp`` ExpSeek). That is not linear at any amplitude: a throttle doublet raises N1
+quickly and lowers it slowly, so N1 stays above the trim and the aircraft gains energy, where any
+linear model answers a zero-mean doublet with a near zero-mean response (measured: 60-95 % error on
+every output of the throttle run). The linear model's ``n1_pct`` row holds the mean rate.
+``compare(..., engine_lag=True)`` scores the model with that one row replaced by the exact
+asymmetric lag identified from JSBSim at the trim
+(:func:`~fdi_sim.aircraft.linearize_response.identify_engine_lag`), which tells whether the rest
+of the model (propeller, airframe, outputs) is right; ``compare(...)`` scores the linear model
+as it is.
+
 Timing convention (that of the simulation loop and of the detectors): the input row ``u_k`` is
 set before JSBSim step ``k``; the outputs read after the step are ``y_k = C x_k + D u_k`` with
 ``x_{k+1} = A_d x_k + B_d u_k`` and ``x_0 = 0`` (JSBSim integrates at the start of a step with the
@@ -18,6 +31,7 @@ derivatives of the previous one, then evaluates forces with the new input).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING, Sequence
@@ -29,6 +43,7 @@ from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
 if TYPE_CHECKING:  # the JSBSim side, imported where it is flown
+    from fdi_sim.aircraft.linearize_response import EngineLag
     from fdi_sim.aircraft.linearize_state import TrimState
     from fdi_sim.aircraft.model import Aircraft
 
@@ -91,10 +106,29 @@ def doublet_signal(n_steps: int, dt_s: float, spec: DoubletSpec) -> NDArray[np.f
     return u
 
 
-def simulate_linear(model: LinearModel, du: NDArray[np.float64]) -> NDArray[np.float64]:
+def simulate_linear(model: LinearModel, du: NDArray[np.float64], engine_lag: EngineLag | None = None
+                    ) -> NDArray[np.float64]:
     """Output deviations of a discrete model from ``x_0 = 0`` for input deviations ``du`` (N, m).
 
     ``y_k = C x_k + D u_k``, ``x_{k+1} = A x_k + B u_k``.
+
+    Parameters
+    ----------
+    model : LinearModel
+        Discrete model.
+    du : NDArray
+        Input deviations, shape (N, m) [units of the inputs].
+    engine_lag : EngineLag, optional
+        Replace the linear update of ``engine_lag.state_name`` by the asymmetric lag toward the
+        target ``K u``: ``z_{k+1} = K u_k + (z_k - K u_k) exp(-dt / tau)``, ``tau`` the up or down
+        time constant as ``z_k`` is below or above the target. ``K`` is the model's own static gain
+        of that row, ``B_ij / (1 - A_ii)``; the row must depend on nothing but its state and input.
+
+    Raises
+    ------
+    DesignError
+        A continuous model, a column count that does not match, or an engine-lag row that
+        depends on other states or inputs.
     """
     if not model.is_discrete:
         raise DesignError("simulate_linear needs a discrete model; call discretize(model, dt_s) first")
@@ -104,10 +138,35 @@ def simulate_linear(model: LinearModel, du: NDArray[np.float64]) -> NDArray[np.f
     x = np.zeros(model.n_states)
     xs = np.empty((du.shape[0], model.n_states))
     A, B = model.A, model.B
+    if engine_lag is None:
+        for k in range(du.shape[0]):
+            xs[k] = x
+            x = A @ x + B @ du[k]
+        return xs @ model.C.T + du @ model.D.T
+    i, j, K = _lag_row(model, engine_lag)
+    r_up, r_down = math.exp(-model.dt_s / engine_lag.tau_up_s), math.exp(-model.dt_s / engine_lag.tau_down_s)
     for k in range(du.shape[0]):
         xs[k] = x
+        target = K * du[k, j]
+        z = x[i]
         x = A @ x + B @ du[k]
+        # FGTurboProp ExpSeek: N1 <- T + (N1 - T) exp(-dt / tau), tau by the direction of travel
+        x[i] = target + (z - target) * (r_up if z < target else r_down)
     return xs @ model.C.T + du @ model.D.T
+
+
+def _lag_row(model: LinearModel, lag: EngineLag) -> tuple[int, int, float]:
+    """State index, input index and static gain ``B_ij / (1 - A_ii)`` of the engine-lag row."""
+    if lag.state_name not in model.state_names or lag.input_name not in model.input_names:
+        raise DesignError(f"engine lag on {lag.state_name!r} <- {lag.input_name!r}: the model has no such "
+                          f"state or input (states {', '.join(model.state_names)})")
+    i, j = model.state_names.index(lag.state_name), model.input_names.index(lag.input_name)
+    a_row, b_row = np.delete(model.A[i], i), np.delete(model.B[i], j)
+    scale = max(abs(model.B[i, j]), 1e-300)
+    if np.max(np.abs(a_row), initial=0.0) > 1e-6 or np.max(np.abs(b_row), initial=0.0) > 1e-6 * scale:
+        raise DesignError(f"the {lag.state_name} row depends on other states or inputs; the engine lag "
+                          "replaces a first-order row driven by one input only")
+    return i, j, float(model.B[i, j] / (1.0 - model.A[i, i]))
 
 
 def nrmse(y_lin: NDArray[np.float64], y_nl: NDArray[np.float64], axis: int | tuple[int, ...] = 0) -> NDArray[np.float64]:
@@ -147,6 +206,8 @@ class DoubletRuns:
         Output order of ``dy``.
     dt_s : float
         Step [s].
+    engine_lag : EngineLag or None
+        The asymmetric N1 lag identified at the trim (None without a gas-generator state).
     """
 
     label: str
@@ -155,6 +216,7 @@ class DoubletRuns:
     dy: NDArray[np.float64]
     output_names: tuple[str, ...]
     dt_s: float
+    engine_lag: EngineLag | None = None
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -178,10 +240,14 @@ class ValidationResult:
     y_lin : NDArray
         The discrete linear model's responses to the same inputs, shape (runs, N, p)
         [units of the outputs].
+    engine_lag : EngineLag or None
+        Set when the model was flown with the asymmetric N1 lag in place of its ``n1_pct`` row
+        (``compare(..., engine_lag=True)``); None for the linear model as it is.
     """
 
     runs: DoubletRuns
     y_lin: NDArray[np.float64]
+    engine_lag: EngineLag | None = None
 
     @cached_property
     def nrmse(self) -> NDArray[np.float64]:
@@ -214,8 +280,19 @@ class ValidationResult:
         return aggregate(self.nrmse_pair[keep], self.rms_nl[keep])
 
 
-def compare(model_d: LinearModel, runs: DoubletRuns) -> ValidationResult:
+def compare(model_d: LinearModel, runs: DoubletRuns, engine_lag: bool = False) -> ValidationResult:
     """Score the discrete model ``model_d`` against nonlinear doublet runs (pure).
+
+    Parameters
+    ----------
+    model_d : LinearModel
+        Discrete model at the runs' step.
+    runs : DoubletRuns
+        The nonlinear runs.
+    engine_lag : bool
+        Fly the model with the asymmetric N1 lag of ``runs.engine_lag`` in place of its
+        ``n1_pct`` row (see the module notes). Without an identified lag (F-16) the model is
+        flown as it is and the result says so (``engine_lag`` None).
 
     Raises
     ------
@@ -226,14 +303,15 @@ def compare(model_d: LinearModel, runs: DoubletRuns) -> ValidationResult:
         raise DesignError(f"the model must be discrete at the runs' step {runs.dt_s} s (got dt_s = {model_d.dt_s})")
     if tuple(model_d.output_names) != tuple(runs.output_names):
         raise DesignError(f"model outputs {model_d.output_names} differ from the runs' {runs.output_names}")
+    lag = runs.engine_lag if engine_lag else None
     y_lin = []
     for name, u in zip(runs.input_names, runs.du):
         if name not in model_d.input_names:
             raise DesignError(f"doublet input {name!r} is not a model input ({', '.join(model_d.input_names)})")
         U = np.zeros((len(u), model_d.n_inputs))
         U[:, model_d.input_names.index(name)] = u
-        y_lin.append(simulate_linear(model_d, U))
-    return ValidationResult(runs=runs, y_lin=np.array(y_lin))
+        y_lin.append(simulate_linear(model_d, U, lag))
+    return ValidationResult(runs=runs, y_lin=np.array(y_lin), engine_lag=lag)
 
 
 def default_doublets(model: LinearModel, settings: ValidationSettings) -> tuple[DoubletSpec, ...]:
@@ -255,6 +333,9 @@ def fly_doublets(ac: Aircraft, ts: TrimState, doublets: Sequence[DoubletSpec], o
                  duration_s: float = ValidationSettings.duration_s) -> DoubletRuns:
     """Fly each doublet in JSBSim from the trim ``ts``; responses relative to an unforced run.
 
+    Also identifies the asymmetric N1 lag at the trim for aircraft with a gas-generator state
+    (``DoubletRuns.engine_lag``; 6 extra steps).
+
     Parameters
     ----------
     ac : fdi_sim.aircraft.Aircraft
@@ -269,7 +350,7 @@ def fly_doublets(ac: Aircraft, ts: TrimState, doublets: Sequence[DoubletSpec], o
     duration_s : float
         Length of each run [s].
     """
-    from fdi_sim.aircraft.linearize_response import simulate_inputs  # JSBSim side
+    from fdi_sim.aircraft.linearize_response import identify_engine_lag, simulate_inputs  # JSBSim side
 
     n = int(round(duration_s / ac.dt_s))
     names = tuple(output_names)
@@ -278,4 +359,4 @@ def fly_doublets(ac: Aircraft, ts: TrimState, doublets: Sequence[DoubletSpec], o
     dy = np.array([simulate_inputs(ac, ts, [spec.input_name], u[:, None], names).y - base
                    for spec, u in zip(doublets, us)])
     return DoubletRuns(label=ts.op.label(), doublets=tuple(doublets), du=us, dy=dy, output_names=names,
-                       dt_s=float(ac.dt_s))
+                       dt_s=float(ac.dt_s), engine_lag=identify_engine_lag(ac, ts))

@@ -15,6 +15,7 @@ from scipy.linalg import expm
 from scipy.signal import dlsim
 
 from fdi_sim.aircraft.linearize import BodyJacobians
+from fdi_sim.aircraft.linearize_response import EngineLag
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.linearize import AERO_STATES, body_to_aero, to_linear_model, uvw_to_aero_jacobian
 from fdi_sim.linear.model import LinearModel
@@ -99,6 +100,53 @@ def test_simulate_linear_matches_scipy_dlsim() -> None:
     u = rng.normal(size=(40, 2))
     _, y_ref, _ = dlsim((m.A, m.B, m.C, m.D, m.dt_s), u)
     np.testing.assert_allclose(simulate_linear(m, u), y_ref, rtol=1e-10, atol=1e-12)
+
+
+def _engine_model(rate: float = 0.7, gain: float = 40.0) -> LinearModel:
+    """Discrete (ZOH) model: N1 lag driving a speed state, read by one output."""
+    A = np.array([[-rate, 0.0], [0.3, -0.5]])
+    B = np.array([[gain * rate, 0.0], [0.0, 1.0]])
+    m = LinearModel(A=A, B=B, C=np.array([[0.0, 1.0], [1.0, 0.0]]), D=np.zeros((2, 2)),
+                    state_names=("n1_pct", "v_fps"), input_names=("throttle_cmd_norm", "w_gust_body_fps"),
+                    output_names=("vc_kts", "n1_pct"))
+    return discretize(m, 1 / 120)
+
+
+def test_engine_lag_with_equal_time_constants_is_the_linear_model() -> None:
+    """ExpSeek with tau_up = tau_down = -dt / ln(A_d[n1, n1]) is the model's own N1 row, exactly."""
+    d = _engine_model()
+    tau = -d.dt_s / math.log(d.A[0, 0])
+    u = np.random.default_rng(9).normal(size=(300, 2)) * [0.02, 1.0]
+    np.testing.assert_allclose(simulate_linear(d, u, EngineLag(tau, tau)), simulate_linear(d, u),
+                               rtol=1e-10, atol=1e-13)
+
+
+def test_engine_lag_follows_expseek_on_a_doublet() -> None:
+    """Up at 1 s, down at 2.4 s (FGTurboProp): N1 rises fast, falls slowly, so it stays above the trim
+    after a zero-mean doublet, which no linear model does."""
+    d = _engine_model()
+    u = np.zeros((600, 2))
+    u[:, 0] = doublet_signal(600, d.dt_s, DoubletSpec("throttle_cmd_norm", 0.02))
+    y = simulate_linear(d, u, EngineLag(1.0, 2.4))[:, 1]
+    # hand-rolled ExpSeek toward 40 u, state before the step -> output
+    n1, ref = 0.0, []
+    for uk in u[:, 0]:
+        ref.append(n1)
+        target = 40.0 * uk
+        n1 = target + (n1 - target) * math.exp(-d.dt_s / (1.0 if n1 < target else 2.4))
+    np.testing.assert_allclose(y, ref, rtol=1e-9, atol=1e-12)
+    assert np.min(y) > -1e-12 and y[-1] > 0.01  # never below the trim; the linear model swings both ways
+    assert np.min(simulate_linear(d, u)[:, 1]) < -0.1
+
+
+def test_engine_lag_needs_a_first_order_row() -> None:
+    d = _engine_model()
+    coupled = LinearModel(A=d.A.T, B=d.B, C=d.C, D=d.D, dt_s=d.dt_s, state_names=d.state_names,
+                          input_names=d.input_names, output_names=d.output_names)
+    with pytest.raises(DesignError, match="depends on other states"):
+        simulate_linear(coupled, np.zeros((3, 2)), EngineLag(1.0, 2.4))
+    with pytest.raises(DesignError, match="no such state"):
+        simulate_linear(d, np.zeros((3, 2)), EngineLag(1.0, 2.4, state_name="n2_pct"))
 
 
 def test_doublet_signal_and_error_metrics() -> None:

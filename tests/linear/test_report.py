@@ -1,0 +1,64 @@
+"""The schedule report: pass counts, worst point and output, both validations of the DHC-6 throttle."""
+from __future__ import annotations
+
+import numpy as np
+
+from fdi_sim.linear.report import ENGINE_LAG_KEY, format_report, worst_validation
+from fdi_sim.linear.schedule import ModelSchedule, SchedulePoint
+from fdi_sim.operating_point import OperatingPoint
+
+OUTS = ("q_radps", "nx_g", "h_ft")
+RUNS = ("elevator_cmd_norm", "throttle_cmd_norm")
+
+
+def _entry(pair: list[list[float]]) -> dict:
+    """A validation entry as the grid driver stores it, from per-run, per-output errors (equal RMS)."""
+    P = np.array(pair)
+    agg = np.sqrt(np.mean(P**2, axis=0))  # equal run RMS: aggregate = RMS over runs
+    k, k0 = int(np.argmax(agg)), int(np.argmax(P[0]))
+    return {"nrmse": agg.tolist(), "worst_output": OUTS[k], "worst": float(agg[k]),
+            "worst_without_throttle": float(P[0, k0]), "worst_output_without_throttle": OUTS[k0],
+            "input_names": list(RUNS), "nrmse_pair": P.tolist(), "rms_nl": np.ones_like(P).tolist(),
+            "passed": bool(np.all(agg < 0.05)), "duration_s": 10.0}
+
+
+def _schedule() -> ModelSchedule:
+    pts = []
+    linear = ([[0.01, 0.02, 0.01], [0.60, 0.90, 0.80]], [[0.01, 0.03, 0.02], [0.50, 0.70, 0.90]])
+    lagged = ([[0.01, 0.02, 0.01], [0.02, 0.03, 0.01]], [[0.01, 0.03, 0.02], [0.04, 0.09, 0.03]])
+    for i, vc in enumerate((100.0, 120.0)):
+        pts.append(SchedulePoint(
+            op=OperatingPoint("DHC6", 5000.0, vc_kts=vc), status="ok", index=i,
+            sched={"h_ft": 5000.0, "vc_kts": vc, "flaps_deg": 0.0, "icing_eta": 0.0},
+            trim={"alpha_rad": 0.03, "throttle_cmd_norm": 0.7},
+            info={"modes": [], "validation": {"zoh": _entry(linear[i])}, ENGINE_LAG_KEY: _entry(lagged[i])}))
+    pts.append(SchedulePoint(op=OperatingPoint("DHC6", 5000.0, vc_kts=145.0), status="untrimmable",
+                             reason="throttle_cmd_norm = 1.000 at its limit"))
+    names = {"state_names": ("q_radps",), "input_names": RUNS, "input_kinds": ("control", "control"),
+             "output_names": OUTS, "lagged_outputs": ()}
+    meta = {"grid_source": "test", "validation": {"methods": ["zoh"], "amplitudes": {}, "width_s": 1.0,
+                                                  "duration_s": 10.0}}
+    return ModelSchedule("DHC6", pts, {}, names, meta)
+
+
+def test_report_shows_both_validations_with_pass_counts() -> None:
+    s = _schedule()
+    assert worst_validation(s, "zoh") == ("DHC6 h=5000 ft VC=100 kt", "nx_g", np.sqrt((0.02**2 + 0.9**2) / 2))
+    assert worst_validation(s, ENGINE_LAG_KEY)[1:] == ("nx_g", np.sqrt((0.03**2 + 0.09**2) / 2))
+    text = format_report(s)
+    assert ("- validation (zoh): 0/2 points below 5% on every output; "
+            "worst nx_g 63.7% at DHC6 h=5000 ft VC=100 kt") in text
+    assert "  - leaving out the throttle doublet: 2/2 points pass; worst nx_g 3.0% at DHC6 h=5000 ft VC=120 kt" in text
+    assert ("- validation (zoh with the identified N1 lag): 1/2 points below 5% on every output; "
+            "worst nx_g 6.7% at DHC6 h=5000 ft VC=120 kt") in text
+    assert "### zoh\n" in text and "### zoh with the identified N1 lag\n" in text
+    assert "| 5000 ft 120 KCAS | nx_g | 6.7% | throttle_cmd_norm |" in text  # the run the worst error comes from
+    assert "throttle_cmd_norm = 1.000 at its limit" in text  # points without a model keep their reason
+
+
+def test_report_without_engine_lag_has_no_such_section() -> None:
+    s = _schedule()
+    for p in s.ok_points:
+        del p.info[ENGINE_LAG_KEY]
+    text = format_report(s)
+    assert "N1 lag" not in text and "### zoh\n" in text
