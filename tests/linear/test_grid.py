@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fdi_sim.aircraft.linearize_state import CONTROL_INPUTS, GUST_INPUTS, OPTIONAL_DISTURBANCES
 from fdi_sim.errors import DesignError
 from fdi_sim.isa import isa, vc_from_vt, vt_from_vc
 from fdi_sim.linear.grid import default_grid_path, load_grid, parse_grid_spec, resolve_grid
@@ -113,3 +114,13 @@ def test_validation_defaults_and_values() -> None:
     v = load_grid(default_grid_path("DHC6"), "DHC6").validation
     assert (v.duration_s, v.width_s, v.start_s) == (10.0, 1.0, 0.5)
     assert v.amplitudes["aileron_cmd_norm"] == 0.004
+
+
+@pytest.mark.parametrize("aircraft", ["f16", "DHC6"])
+def test_validation_tables_cover_every_model_input(aircraft: str) -> None:
+    """default_doublets refuses a model input without an amplitude, so each shipped table names every
+    command and gust; the DHC-6 one also the icing direction its iced grids carry (icing/eta overlay)."""
+    amps = load_grid(default_grid_path(aircraft), aircraft).validation.amplitudes
+    need = set(CONTROL_INPUTS + GUST_INPUTS) | (set(OPTIONAL_DISTURBANCES) if aircraft == "DHC6" else set())
+    assert need <= set(amps), need - set(amps)
+    assert all(a > 0 for a in amps.values())
