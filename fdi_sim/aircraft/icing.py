@@ -42,10 +42,10 @@ import numpy as np
 
 from fdi_sim.aircraft.model import iced_model_name
 from fdi_sim.aircraft.overlays import GENERATORS
+from fdi_sim.data import AIRCRAFT_DATA  # aircraft/ in a checkout, packaged in a wheel
 from fdi_sim.errors import FdiSimError
 
 #: folder of the per-aircraft data files
-AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
 #: aircraft with an icing overlay -> JSBSim model name of the overlay
 ICED_MODELS: Mapping[str, str] = MappingProxyType({n: iced_model_name(n) for n in ("DHC6", "f16")})
 #: the parts of an aero function a k can scale; ``T`` is the function's one table

@@ -40,14 +40,12 @@ from itertools import product
 from pathlib import Path
 from typing import Any, Mapping
 
+from fdi_sim.data import AIRCRAFT_DATA  # aircraft/ in a checkout, packaged in a wheel
 from fdi_sim.errors import DesignError
 from fdi_sim.isa import vc_from_vt, vt_from_vc
 from fdi_sim.linear.validate import ValidationSettings
 from fdi_sim.operating_point import OperatingPoint
 
-
-#: folder of the per-aircraft data files
-AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
 #: axes a grid block may have
 AXES: tuple[str, ...] = ("h_ft", "vt_kts", "vc_kts", "flaps_deg", "icing_eta")
 #: quantities an envelope may limit

@@ -14,13 +14,13 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
+from fdi_sim.data import AIRCRAFT_DATA  # aircraft/ in a checkout, packaged in a wheel
+
 BLOCK_STEPS = 120
 
 

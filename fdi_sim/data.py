@@ -1,0 +1,18 @@
+"""Where fdi-sim's per-aircraft data lives (autopilot gains, sensor suites, grids, icing tables).
+
+The data is kept at the top of the repository in ``aircraft/<name>/``; ``fdi_sim/_aircraft`` is a
+link to it, and wheels carry the files there (``package-data``), so the same path works from a
+source checkout, an editable install and a regular ``pip install``.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+#: folder with one sub-folder of TOML files per aircraft (``f16``, ``DHC6``)
+AIRCRAFT_DATA: Path = Path(__file__).resolve().parent / "_aircraft"
+
+
+def aircraft_file(aircraft: str, name: str) -> Path:
+    """``aircraft/<aircraft>/<name>`` (``"DHC6..."`` variants share the DHC-6 folder)."""
+    base = "DHC6" if aircraft.startswith("DHC6") else aircraft
+    return AIRCRAFT_DATA / base / name
