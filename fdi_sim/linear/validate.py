@@ -16,7 +16,7 @@ Engine lag (DHC-6)
 The PT6A gas generator follows the throttle with a 1 s lag up and a 2.4 s lag down
 (``FGTurboProp`` ExpSeek). That is not linear at any amplitude: a throttle doublet raises N1
 quickly and lowers it slowly, so N1 stays above the trim and the aircraft gains energy, where any
-linear model answers a zero-mean doublet with a near zero-mean response (measured: 60-95 % error on
+linear model answers a zero-mean doublet with a near zero-mean response (measured: 40-95 % error on
 every output of the throttle run). The linear model's ``n1_pct`` row holds the mean rate.
 ``compare(..., engine_lag=True)`` scores the model with that one row replaced by the exact
 asymmetric lag identified from JSBSim at the trim
