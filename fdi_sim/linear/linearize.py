@@ -275,6 +275,8 @@ def _point_info(ac: Aircraft, lp: LinearizedPoint, validation: ValidationSetting
         runs = fly_doublets(ac, lp.trim_state, default_doublets(m, validation), m.output_names, validation.duration_s)
         info["validation"] = {meth: _validation_info(compare(discretize(m, ac.dt_s, method=meth), runs))
                               for meth in methods}
+        if getattr(runs, "engine_lag", None) is not None:  # turboprop: N1 row replaced by the identified lag
+            info["validation_engine_lag"] = _validation_info(compare(discretize(m, ac.dt_s), runs, engine_lag=True))
         info["timing_s"]["validate"] = time.perf_counter() - t0
     return info
 
