@@ -168,3 +168,20 @@ def test_info_lists_the_faults(tmp_path: Path) -> None:
     text = log_info(run["res"].log_path).format()
     assert "q_radps_bias  sensor-bias-v1 on q_radps, [1, 2.5) s" in text
     assert "jam  actuator-stuck-v1 on rudder, from 2 s" in text
+
+
+def test_intermittent_stuck_surface_is_released_between_windows(tmp_path: Path) -> None:
+    from conftest import doublet
+
+    faults = [{"type": "actuator-stuck-v1", "target": "elevator", "t_start_s": 1.0,
+               "intermittent": {"windows_s": [[1.0, 2.0], [3.0, 4.0]]}}]
+    run = fly(tmp_path, "DHC6", faults=faults, maneuvers=[doublet("elevator", 1.5, 0.05, 1.0)], duration_s=5.0)
+    s = run["/truth/surfaces"]
+    t, pos = s["t_s"], s["elevator_pos_rad"]
+
+    def span(a: float, b: float) -> float:
+        return float(np.ptp(pos[(t >= a) & (t < b)]))
+
+    assert span(1.0, 2.0) == 0.0 and span(3.0, 4.0) == 0.0  # jammed in each window (re-captured at onset)
+    assert span(2.0, 3.0) > np.radians(1.0)  # released between: it follows the doublet again
+    assert pos[(t >= 3.0) & (t < 4.0)][0] != pos[(t >= 1.0) & (t < 2.0)][0]
