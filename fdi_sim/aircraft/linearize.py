@@ -25,6 +25,27 @@ plain central differencing; it also handles the DHC-6 propeller speed, which JSB
 let us write: its knob is the throttle used while the engines settle, after which throttle and
 N1 are set back to their trim values.
 
+Passes of one simulation step (the step model)
+----------------------------------------------
+The Jacobians above are *settled*: every evaluation repeats the model until the signals that
+JSBSim carries from one pass to the next have caught up with the perturbed state. The simulation
+does not wait: in ``FGFDMExec::Run`` the FCS runs before FGAuxiliary, so the F-16 FBW reads rates,
+alpha and air data one step late and the pilot-station accelerations two steps late; the aero
+model reads alpha-dot and (DHC-6) ``aero/cl-squared`` from the previous pass. :func:`pass_jacobians`
+measures how the derivatives build up pass by pass from a settled trim:
+
+* inputs (commands, gusts, disturbances): the input is changed and the model run pass by pass with
+  tiny real steps, exactly as the simulation meets a new input;
+* air-relative velocity (Vt, alpha, beta): through the gust columns, which move the air-relative
+  velocity without a ``run_ic`` (``run_ic`` runs *two* passes, ``FGFDMExec::Initialize`` runs one,
+  and refreshes the air data the FCS reads), plus the kinematic terms, which act at once;
+* rates, attitude and altitude: ``run_ic`` at the perturbed state; its second pass is the
+  simulation's second pass. For the first pass of rates and altitude the FCS outputs are frozen
+  at the trim (its inputs are stale there); attitude is read by the FCS from FGPropagate, fresh.
+
+``fdi_sim.linear.step`` turns these into the discrete model of JSBSim's step (third-order
+Adams-Bashforth, :class:`~fdi_sim.aircraft.model.Aircraft`).
+
 Engines
 -------
 * ``"quasi_static"`` (F-16 default): thrust follows the throttle at once. The F100 spools by a
@@ -42,13 +63,15 @@ import time
 from dataclasses import dataclass
 from typing import Mapping
 
+import jsbsim
 import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.aircraft.linearize_state import (
-    BODY_STATES, CONTROL_INPUTS, ENGINE_STATES, GUST_INPUTS, GUST_PROPS, OPTIONAL_DISTURBANCES, SENSOR_OUTPUTS,
-    TrimState, capture_trim, has_propeller, set_state, wrap_rad,
+    BODY_STATES, CONTROL_INPUTS, ENGINE_STATES, GUST_INPUTS, GUST_PROPS, LAGGED_OUTPUTS, OPTIONAL_DISTURBANCES,
+    SENSOR_OUTPUTS, TrimState, capture_trim, has_propeller, restore_trim, set_state, wrap_rad,
 )
+from fdi_sim.aircraft.properties import property_map
 from fdi_sim.aircraft.model import Aircraft
 from fdi_sim.aircraft.trim import TrimResult
 from fdi_sim.errors import DesignError
@@ -89,6 +112,10 @@ class FDSettings:
     engine : str
         ``"auto"`` (dynamic for propeller aircraft, quasi-static otherwise), ``"dynamic"`` or
         ``"quasi_static"``.
+    step_passes : int
+        Passes measured by :func:`pass_jacobians` for the step model (0: none). Five cover the
+        F-16 FBW chains to 4e-4 of the largest entry (the pilot-station accelerations reach the
+        FCS in the third pass, the PID derivative terms settle in the fourth).
     """
 
     step_vel_fps: float = 0.1
@@ -100,6 +127,41 @@ class FDSettings:
     n_settle: int = 5
     dt_eval_s: float = 1e-6
     engine: str = "auto"
+    step_passes: int = 5
+
+
+@dataclass(frozen=True, eq=False)
+class PassJacobians:
+    """Derivatives of the rigid-body states pass by pass from a settled trim (body axes).
+
+    ``Ax[k]`` and ``Bu[k]`` are the Jacobians of the 10 :data:`BODY_STATES` derivatives after
+    pass ``k + 1`` of the model with the state or input changed before pass 1; the last pass is
+    taken as settled (``fdi_sim.linear.step`` makes the last entry equal to the settled ``A``, ``B``).
+
+    Attributes
+    ----------
+    Ax : NDArray
+        Shape (P, 10, n): columns are all states of the model (engine columns act at once).
+    Bu : NDArray
+        Shape (P, 10, m), columns the model inputs.
+    Lf : NDArray
+        Shape (q, 10): the lagged outputs (:data:`LAGGED_OUTPUTS`) as JSBSim computes them in the
+        next pass, from the state derivatives of this one (the rest, ``C x + D u - Lf (A x + B u)``,
+        follows from the settled model).
+    lagged_outputs : tuple of str
+        The outputs of ``Lf``.
+    dt_s : float
+        The simulation step the passes belong to [s].
+    lf_residual : float
+        Relative residual of the least-squares fit of ``Lf`` [-].
+    """
+
+    Ax: NDArray[np.float64]
+    Bu: NDArray[np.float64]
+    Lf: NDArray[np.float64]
+    lagged_outputs: tuple[str, ...]
+    dt_s: float
+    lf_residual: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,6 +193,8 @@ class BodyJacobians:
         Wall time of the linearization [s].
     notes : tuple of str
         What was left out and why (e.g. an unavailable disturbance).
+    passes : PassJacobians or None
+        The pass-by-pass Jacobians of the step model (:func:`pass_jacobians`), if measured.
     """
 
     A: NDArray[np.float64]
@@ -149,6 +213,7 @@ class BodyJacobians:
     engine: str
     elapsed_s: float
     notes: tuple[str, ...] = ()
+    passes: PassJacobians | None = None
 
 
 @dataclass(frozen=True)
@@ -331,10 +396,166 @@ def central_difference(ac: Aircraft, tr: TrimResult, settings: FDSettings | None
     states = BODY_STATES + (ENGINE_STATES if engine == "dynamic" else ())
     n = len(states)
     kinds = ("control",) * len(CONTROL_INPUTS) + ("disturbance",) * (len(GUST_INPUTS) + len(extra))
+    inputs = CONTROL_INPUTS + GUST_INPUTS + tuple(extra)
+    passes = None
+    if s.step_passes > 0:
+        passes = pass_jacobians(ac, ts, M[:n, :n], M[:n, n:], M[n:, :n], inputs, extra, s)
     return BodyJacobians(
         A=M[:n, :n], B=M[:n, n:], C=M[n:, :n], D=M[n:, n:],
-        state_names=states, input_names=CONTROL_INPUTS + GUST_INPUTS + tuple(extra), output_names=SENSOR_OUTPUTS,
+        state_names=states, input_names=inputs, output_names=SENSOR_OUTPUTS,
         input_kinds=kinds, x0=center.z[:n], u0=v0[nx:], y0=center.f[n:], xdot0=center.f[:n],
         knob_condition=cond, engine=engine, elapsed_s=time.perf_counter() - t_start, notes=tuple(notes),
+        passes=passes,
     )
+
+
+#: state columns whose first pass is measured with the FCS outputs frozen at the trim: the FCS
+#: reads rates and air data (FGAuxiliary, after the FCS in FGFDMExec::Run) one step late, but the
+#: attitude (FGPropagate, first in the step) fresh
+_FROZEN_FIRST_PASS: tuple[str, ...] = ("p_radps", "q_radps", "r_radps", "h_ft")
+_N_RIGID = len(BODY_STATES)
+
+
+def _fcs_output_nodes(ac: Aircraft) -> list[object]:
+    """Every writable ``fcs/`` node except the pilot's commands (the FCS outputs to freeze)."""
+    pm = ac.fdm.get_property_manager()
+    names = [c.split(" ")[0] for c in ac.fdm.get_property_catalog() if c.startswith("fcs/") and "(RW)" in c]
+    return [pm.get_node(n, False) for n in names if "-cmd-norm" not in n]
+
+
+def pass_jacobians(ac: Aircraft, ts: TrimState, A: NDArray[np.float64], B: NDArray[np.float64],
+                   C: NDArray[np.float64], input_names: tuple[str, ...],
+                   extra: Mapping[str, tuple[str, float]], settings: FDSettings) -> PassJacobians:
+    """Derivatives pass by pass after a state or input change from a settled trim (see the module notes).
+
+    Parameters
+    ----------
+    ac : Aircraft
+        The aircraft at the trim ``ts``; left there afterwards.
+    ts : TrimState
+        The trim.
+    A, B, C : NDArray
+        The settled body Jacobians of :func:`central_difference` (the last pass is scaled onto them).
+    input_names : tuple of str
+        The model inputs (:data:`CONTROL_INPUTS`, :data:`GUST_INPUTS`, then the keys of ``extra``).
+    extra : mapping
+        ``name -> (property, step)`` of the extra disturbance columns.
+    settings : FDSettings
+        ``step_passes`` passes of ``dt_eval_s``; the step sizes of the central differences.
+
+    Returns
+    -------
+    PassJacobians
+
+    Notes
+    -----
+    The throttle columns are the settled ones at every pass: the throttle acts through the engine
+    (its states, or its quasi-static thrust), which a 1e-6 s pass does not move.
+    """
+    fdm = ac.fdm
+    P, nr, n = settings.step_passes, _N_RIGID, A.shape[0]
+    dyn = ts.n1_pct is not None and n > nr
+    n1_props = [f"propulsion/engine[{i}]/n1" for i in range(ac.n_engines)]
+    rpm_props = [f"propulsion/engine[{i}]/propeller-rpm" for i in range(ac.n_engines)]
+    read_lag = ac.reader(LAGGED_OUTPUTS)
+
+    def engine() -> NDArray[np.float64]:
+        return np.array([np.mean([fdm[p] for p in n1_props]), np.mean([fdm[p] for p in rpm_props])])
+
+    restore_trim(ac, ts)  # central_difference leaves the aircraft at its last evaluation
+    e_trim = engine() if dyn else np.zeros(0)
+
+    def derivs() -> NDArray[np.float64]:
+        f = np.array([fdm[p] for p in _DERIV_PROPS])
+        if dyn:  # an engine that moved off its trim (steady state of a perturbed point) acts through A
+            f -= A[:nr, nr:] @ (engine() - e_trim)
+        return f
+
+    def settle() -> None:
+        restore_trim(ac, ts)
+        for _ in range(settings.n_settle):
+            fdm.run()
+
+    def setter(name: str) -> tuple[list[str], float]:
+        if name in CONTROL_INPUTS:
+            props = ([f"fcs/throttle-cmd-norm[{i}]" for i in range(ac.n_engines)] if name == "throttle_cmd_norm"
+                     else [property_map(ac.name)[name]])
+            return props, float(ts.u_cmd[CONTROL_INPUTS.index(name)])
+        prop = extra[name][0]
+        return [prop], float(fdm[prop])
+
+    steps = {**{nm: settings.step_cmd_norm for nm in CONTROL_INPUTS}, **{nm: settings.step_vel_fps for nm in GUST_INPUTS},
+             **{nm: st for nm, (_, st) in extra.items()}}
+    Fu = np.zeros((P, nr, len(input_names)))
+    Yu = np.zeros((P, len(LAGGED_OUTPUTS), len(input_names)))
+    cols = [BODY_STATES.index(c) for c in BODY_STATES[3:]]
+    Rx = np.zeros((P, nr, len(cols)))
+    nodes = _fcs_output_nodes(ac)
+    fdm.set_dt(settings.dt_eval_s)
+    try:
+        for j, name in enumerate(input_names):
+            h = steps[name]
+            for sign in (1.0, -1.0):
+                settle()
+                props, base = setter(name) if name not in GUST_INPUTS else ([], 0.0)
+                for prop in props:
+                    fdm[prop] = base + sign * h
+                if name in GUST_INPUTS:  # body-axis gust at the trim attitude -> JSBSim's NED gust
+                    g_ned = ts.T_b2n @ (sign * h * np.eye(3)[GUST_INPUTS.index(name)])
+                    for prop, v in zip(GUST_PROPS, g_ned):
+                        fdm[prop] = v
+                for k in range(P):
+                    fdm.run()
+                    Fu[k, :, j] += sign * derivs() / (2 * h)
+                    Yu[k, :, j] += sign * read_lag() / (2 * h)
+                for prop in props:
+                    fdm[prop] = base
+                for prop in GUST_PROPS:
+                    fdm[prop] = 0.0
+        for c, i in enumerate(cols):
+            frozen = BODY_STATES[i] in _FROZEN_FIRST_PASS
+            h = settings.step_h_ft if BODY_STATES[i] == "h_ft" else settings.step_angle_rad
+            for sign in (1.0, -1.0):
+                x = ts.x_body.copy()
+                x[i] += sign * h
+                seq = []
+                if frozen:  # first pass: the FCS outputs stay at the trim (their inputs are stale)
+                    settle()
+                    for node in nodes:
+                        node.set_attribute(jsbsim.Attribute.WRITE, False)
+                    try:
+                        set_state(ac, ts, x, ts.u_cmd, None, ts.n1_pct)
+                    finally:
+                        for node in nodes:
+                            node.set_attribute(jsbsim.Attribute.WRITE, True)
+                    seq.append(derivs())
+                settle()
+                set_state(ac, ts, x, ts.u_cmd, None, ts.n1_pct)  # run_ic: the simulation's second pass
+                seq.append(derivs())
+                while len(seq) < P:
+                    fdm.run()
+                    seq.append(derivs())
+                if not frozen:  # attitude: the FCS reads it fresh, so pass 1 equals pass 2
+                    seq = [seq[0]] + seq[:P - 1]
+                Rx[:, :, c] += sign * np.array(seq) / (2 * h)
+    finally:
+        fdm.set_dt(ac.dt_s)
+        for prop in GUST_PROPS:
+            fdm[prop] = 0.0
+        restore_trim(ac, ts)
+    # the last pass is taken as settled: shift every sequence onto the settled Jacobians
+    ig = [input_names.index(g) for g in GUST_INPUTS]
+    Fv = -Fu[:, :, ig]  # d f / d(air-relative body velocity) = -d f / d(gust), pass by pass
+    Ax = np.repeat(A[None, :nr, :], P, axis=0)
+    Ax[:, :, :3] -= Fv[-1][None] - Fv
+    Ax[:, :, 3:nr] -= Rx[-1][None] - Rx
+    Bu = B[None, :nr, :] - (Fu[-1][None] - Fu)
+    if "throttle_cmd_norm" in input_names:
+        Bu[:, :, input_names.index("throttle_cmd_norm")] = B[:nr, input_names.index("throttle_cmd_norm")]
+    # lagged outputs of pass k + 1 are computed from the derivatives of pass k: Y_{k+1} = Lf F_k
+    X = Fu[:-1].transpose(1, 0, 2).reshape(nr, -1)
+    Y = Yu[1:].transpose(1, 0, 2).reshape(len(LAGGED_OUTPUTS), -1)
+    Lf = np.linalg.lstsq(X.T, Y.T, rcond=None)[0].T
+    res = float(np.max(np.abs(Lf @ X - Y)) / max(np.max(np.abs(Y)), 1e-300))
+    return PassJacobians(Ax=Ax, Bu=Bu, Lf=Lf, lagged_outputs=LAGGED_OUTPUTS, dt_s=float(ac.dt_s), lf_residual=res)
 

@@ -25,17 +25,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 import fdi_sim
-from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, central_difference
+from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, PassJacobians, central_difference
 from fdi_sim.aircraft.linearize_fglin import JsbsimLinearization, fglinearization
 from fdi_sim.aircraft.linearize_state import LAGGED_OUTPUTS, TrimState, capture_trim, has_propeller
 from fdi_sim.aircraft.model import AIRCRAFT, Aircraft
 from fdi_sim.aircraft.trim import TrimResult, trim
 from fdi_sim.errors import DesignError, TrimError
 from fdi_sim.linear.grid import GridSpec
-from fdi_sim.linear.model import LinearModel
+from fdi_sim.linear.model import LinearModel, StepTerms
 from fdi_sim.linear.modes import identify_modes
 from fdi_sim.linear.schedule import ARRAYS, ModelSchedule, SchedulePoint
-from fdi_sim.linear.transform import DISCRETIZATIONS, discretize
+from fdi_sim.linear.transform import discretize
 from fdi_sim.linear.validate import ValidationResult, ValidationSettings, compare, default_doublets, fly_doublets
 from fdi_sim.operating_point import OperatingPoint
 from fdi_sim.units import KT_PER_FPS
@@ -80,7 +80,9 @@ def body_to_aero(bj: BodyJacobians) -> BodyJacobians:
 
     A similarity transform ``x_a = T x_b`` with ``T = diag(J, I)`` and ``J`` from
     :func:`uvw_to_aero_jacobian` at the trim: ``A_a = T A T^-1``, ``B_a = T B``, ``C_a = C T^-1``,
-    ``D_a = D``. Eigenvalues and input-output behaviour are unchanged.
+    ``D_a = D``. Eigenvalues and input-output behaviour are unchanged. The pass Jacobians (if any)
+    are transformed the same way (their rows are the first 10 states, ``T_r = T[:10, :10]``):
+    ``Ax_a = T_r Ax T^-1``, ``Bu_a = T_r Bu``, ``Lf_a = Lf T_r^-1``.
     """
     if bj.state_names[:3] != ("u_body_fps", "v_body_fps", "w_body_fps"):
         raise DesignError(f"body_to_aero expects body velocity states first, got {bj.state_names[:3]}")
@@ -93,21 +95,35 @@ def body_to_aero(bj: BodyJacobians) -> BodyJacobians:
     vt = math.hypot(u, v, w)
     x0[:3] = [vt, math.atan2(w, u), math.asin(v / vt)]
     xdot0 = T @ bj.xdot0
+    passes = bj.passes
+    if passes is not None:
+        nr = passes.Ax.shape[1]
+        Tr = T[:nr, :nr]
+        passes = replace(passes, Ax=np.einsum("ij,pjk,kl->pil", Tr, passes.Ax, Ti), Bu=np.einsum("ij,pjm->pim", Tr, passes.Bu),
+                         Lf=passes.Lf @ np.linalg.inv(Tr))
     return replace(
         bj, A=T @ bj.A @ Ti, B=T @ bj.B, C=bj.C @ Ti, D=bj.D.copy(),
-        state_names=AERO_STATES + bj.state_names[len(AERO_STATES):], x0=x0, xdot0=xdot0,
+        state_names=AERO_STATES + bj.state_names[len(AERO_STATES):], x0=x0, xdot0=xdot0, passes=passes,
     )
+
+
+def step_terms(passes: PassJacobians) -> StepTerms:
+    """The :class:`~fdi_sim.linear.model.StepTerms` of pass Jacobians (already in the model's states)."""
+    return StepTerms(Ax=passes.Ax, Bu=passes.Bu, Lf=passes.Lf, lagged_outputs=passes.lagged_outputs,
+                     dt_s=passes.dt_s, n_rigid=passes.Ax.shape[1])
 
 
 def to_linear_model(bj: BodyJacobians, op: OperatingPoint | None = None, meta: dict[str, Any] | None = None) -> LinearModel:
     """Assemble a continuous-time :class:`LinearModel` in aero states from body Jacobians."""
     aero = body_to_aero(bj) if bj.state_names[0] == "u_body_fps" else bj
+    extra = {"step_lf_residual": aero.passes.lf_residual} if aero.passes is not None else {}
     return LinearModel(
         A=aero.A, B=aero.B, C=aero.C, D=aero.D, dt_s=0.0, state_names=aero.state_names,
         input_names=aero.input_names, output_names=aero.output_names, input_kinds=aero.input_kinds,
         x0=aero.x0, u0=aero.u0, y0=aero.y0, op=op,
         meta={"engine": aero.engine, "knob_condition": aero.knob_condition, "notes": list(aero.notes),
-              "lagged_outputs": [n for n in LAGGED_OUTPUTS if n in aero.output_names], **(meta or {})},
+              "lagged_outputs": [n for n in LAGGED_OUTPUTS if n in aero.output_names], **extra, **(meta or {})},
+        step=step_terms(aero.passes) if aero.passes is not None else None,
     )
 
 
@@ -232,23 +248,55 @@ def _modes_info(model: LinearModel) -> list[dict[str, Any]]:
             for m in identify_modes(model.A, model.state_names).modes]
 
 
-def _fglin_info(model: LinearModel, fg_eigs: NDArray[np.complex128]) -> dict[str, Any]:
-    """Our modes (same 10 aero states) against FGLinearization's eigenvalues.
+def _fglin_info(model: LinearModel, fg_eigs: NDArray[np.complex128], dt_s: float | None = None) -> dict[str, Any]:
+    """Our modes (same 10 aero states) against FGLinearization's eigenvalues, and both against the simulation.
 
     Returns
     -------
     dict
         ``per_mode``: ``"<name> <real part>" -> relative difference`` [-]; ``max_rel``: the
         largest over the non-zero roots (a zero root has no relative error) [-]; ``fglin_eigs``:
-        FGLinearization's eigenvalues as ``[re, im]`` [1/s].
+        FGLinearization's eigenvalues as ``[re, im]`` [1/s]. With step terms and ``dt_s`` also
+        ``sim``: the poles of the discrete model of the simulation step mapped back by
+        ``ln(z) / dt`` (:func:`fdi_sim.linear.step.equivalent_poles`, the referee: what the 120 Hz
+        simulation does) and, per mode, the relative difference of ours (``ours_vs_sim``) and of
+        FGLinearization's (``fglin_vs_sim``) to them.
     """
     idx = [model.state_names.index(s) for s in AERO_STATES]
     mt = identify_modes(model.A[np.ix_(idx, idx)], AERO_STATES)
     rel = mt.relative_errors(fg_eigs)
     big = np.array([abs(m.eigenvalue) > 1e-3 for m in mt.modes])
-    return {"max_rel": float(np.max(rel[big])) if big.any() else 0.0,
-            "per_mode": {f"{m.name} {m.eigenvalue.real:.4g}": float(r) for m, r in zip(mt.modes, rel)},
-            "fglin_eigs": [[float(z.real), float(z.imag)] for z in fg_eigs]}
+    out: dict[str, Any] = {
+        "max_rel": float(np.max(rel[big])) if big.any() else 0.0,
+        "per_mode": {f"{m.name} {m.eigenvalue.real:.4g}": float(r) for m, r in zip(mt.modes, rel)},
+        "fglin_eigs": [[float(z.real), float(z.imag)] for z in fg_eigs]}
+    if model.step is not None and dt_s is not None and len(idx) == model.n_states:
+        from scipy.optimize import linear_sum_assignment
+
+        from fdi_sim.linear.modes import match_eigenvalues
+        from fdi_sim.linear.step import equivalent_poles
+
+        sim = equivalent_poles(discretize(model, dt_s, method="step"))
+        ours = mt.eigenvalues()
+        if sim.size >= ours.size:
+            ri, ci = linear_sum_assignment(np.abs(ours[:, None] - sim[None, :]))
+            sim_m = sim[ci[np.argsort(ri)]]  # the simulation's pole next to each of ours, in mode order
+            k, _ = match_eigenvalues(sim_m, fg_eigs)
+            fg_m = fg_eigs[k]
+            names, starts = [], []
+            i = 0
+            for m in mt.modes:
+                names.append(f"{m.name} {m.eigenvalue.real:.4g}")
+                starts.append(i)
+                i += 2 if m.is_pair else 1
+
+            def per_mode(a: NDArray[np.complex128]) -> dict[str, float]:
+                r = np.abs(a - sim_m) / np.maximum(np.abs(sim_m), 1e-3)
+                return {nm: float(np.max(r[s0:s0 + (2 if m.is_pair else 1)])) for nm, s0, m in zip(names, starts, mt.modes)}
+
+            out["sim"] = {"poles": [[float(z.real), float(z.imag)] for z in sim_m],
+                          "ours_vs_sim": per_mode(ours), "fglin_vs_sim": per_mode(fg_m)}
+    return out
 
 
 def _validation_info(vr: ValidationResult) -> dict[str, Any]:
@@ -263,26 +311,41 @@ def _validation_info(vr: ValidationResult) -> dict[str, Any]:
 
 def _point_info(ac: Aircraft, lp: LinearizedPoint, validation: ValidationSettings | None,
                 methods: Sequence[str]) -> dict[str, Any]:
-    """What the schedule records of one linearized point: modes, FGLinearization check, validation."""
+    """What the schedule records of one linearized point: modes, FGLinearization check, validation.
+
+    ``validation[method]`` per discretization (``"step"`` only for models with step terms);
+    ``validation_engine_lag`` (turboprops): the step model (ZOH without step terms) flown with the
+    identified N1 lag in place of its N1 row, its ``method`` says which.
+    """
     m = lp.model
     assert m is not None and lp.trim_state is not None
     info: dict[str, Any] = {"modes": _modes_info(m), "timing_s": dict(lp.timing_s),
                             "engine": m.meta.get("engine"), "knob_condition": m.meta.get("knob_condition")}
     if lp.fglin_eigs is not None:
-        info["fglin"] = _fglin_info(m, lp.fglin_eigs)
+        info["fglin"] = _fglin_info(m, lp.fglin_eigs, ac.dt_s)
     if validation is not None:
         t0 = time.perf_counter()
         runs = fly_doublets(ac, lp.trim_state, default_doublets(m, validation), m.output_names, validation.duration_s)
-        info["validation"] = {meth: _validation_info(compare(discretize(m, ac.dt_s, method=meth), runs))
-                              for meth in methods}
+        usable = [meth for meth in methods if meth != "step" or m.step is not None]
+        models = {meth: discretize(m, ac.dt_s, method=meth) for meth in usable}
+        info["validation"] = {meth: _validation_info(compare(md, runs)) for meth, md in models.items()}
+        if "step" in models:
+            info["step_states"] = models["step"].n_states
         if getattr(runs, "engine_lag", None) is not None:  # turboprop: N1 row replaced by the identified lag
-            info["validation_engine_lag"] = _validation_info(compare(discretize(m, ac.dt_s), runs, engine_lag=True))
+            meth = "step" if m.step is not None else "zoh"
+            md = models.get(meth) or discretize(m, ac.dt_s, method=meth)
+            info["validation_engine_lag"] = {**_validation_info(compare(md, runs, engine_lag=True)), "method": meth}
         info["timing_s"]["validate"] = time.perf_counter() - t0
     return info
 
 
+#: discretizations validated by :func:`linearize_grid` by default: the detectors' ZOH model and the
+#: model of the simulation step (``"euler"`` on request)
+VALIDATED: tuple[str, ...] = ("zoh", "step")
+
+
 def linearize_grid(grid: GridSpec, settings: FDSettings | None = None, validate: bool = True,
-                   methods: Sequence[str] = DISCRETIZATIONS, check_fglin: bool | None = None,
+                   methods: Sequence[str] = VALIDATED, check_fglin: bool | None = None,
                    progress: Callable[[int, int, SchedulePoint], None] | None = None) -> ModelSchedule:
     """Trim, linearize and (optionally) validate every point of a grid.
 
@@ -295,7 +358,8 @@ def linearize_grid(grid: GridSpec, settings: FDSettings | None = None, validate:
     validate : bool
         Fly the doublets at every trimmed point (about 0.3 s per point).
     methods : sequence of str
-        Discretizations to validate (the nonlinear runs are shared).
+        Discretizations to validate (the nonlinear runs are shared); ``"step"`` is validated
+        where the model has step terms (``FDSettings.step_passes > 0``, the default).
     check_fglin : bool, optional
         FGLinearization cross-check (default: aircraft without propellers).
     progress : callable, optional

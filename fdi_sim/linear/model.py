@@ -2,10 +2,75 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+
+
+@dataclass(frozen=True, eq=False)
+class StepTerms:
+    """How the derivatives of a continuous model build up within JSBSim's simulation step.
+
+    Measured by :func:`fdi_sim.aircraft.linearize.pass_jacobians` and turned into the discrete
+    model of the simulation step by :mod:`fdi_sim.linear.step` (``discretize(..., method="step")``).
+    ``Ax[k] x + Bu[k] u`` is the derivative of the first ``n_rigid`` states after pass ``k + 1``
+    of the model with ``x`` and ``u`` changed before pass 1; ``Ax[-1]`` and ``Bu[-1]`` are the
+    settled rows of the model's ``A`` and ``B``.
+
+    Attributes
+    ----------
+    Ax : NDArray
+        Shape (P, n_rigid, n) [1/s in the units of the states].
+    Bu : NDArray
+        Shape (P, n_rigid, m).
+    Lf : NDArray
+        Shape (q, n_rigid): the lagged outputs computed in the next pass from these derivatives.
+    lagged_outputs : tuple of str
+        Names of the rows of ``Lf`` (a subset of the model outputs).
+    dt_s : float
+        The simulation step [s].
+    n_rigid : int
+        States integrated by JSBSim's ``FGPropagate`` (the first ones); the rest (engine) are
+        updated inside the pass by their own models.
+    integrator : str
+        ``"ab3"``: third-order Adams-Bashforth, as ``Aircraft`` sets all four integrators.
+    """
+
+    Ax: NDArray[np.float64]
+    Bu: NDArray[np.float64]
+    Lf: NDArray[np.float64]
+    lagged_outputs: tuple[str, ...]
+    dt_s: float
+    n_rigid: int = 10
+    integrator: str = "ab3"
+
+    def __post_init__(self) -> None:
+        Ax, Bu, Lf = (np.asarray(a, dtype=float) for a in (self.Ax, self.Bu, self.Lf))
+        if Ax.ndim != 3 or Bu.ndim != 3 or Ax.shape[:2] != Bu.shape[:2] or Ax.shape[1] != self.n_rigid:
+            raise ValueError(f"step terms: Ax{Ax.shape} and Bu{Bu.shape} must be (P, n_rigid={self.n_rigid}, .)")
+        if Lf.shape != (len(self.lagged_outputs), self.n_rigid):
+            raise ValueError(f"step terms: Lf{Lf.shape} must be ({len(self.lagged_outputs)}, {self.n_rigid})")
+        if self.integrator != "ab3" or not self.dt_s > 0:
+            raise ValueError(f"step terms: integrator {self.integrator!r} (only 'ab3') and dt_s {self.dt_s} (> 0)")
+        for name, a in (("Ax", Ax), ("Bu", Bu), ("Lf", Lf)):
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        object.__setattr__(self, "lagged_outputs", tuple(self.lagged_outputs))
+
+    @property
+    def n_passes(self) -> int:
+        return self.Ax.shape[0]
+
+    def select_inputs(self, idx: Sequence[int]) -> "StepTerms":
+        """The terms for a subset of the input columns."""
+        return StepTerms(self.Ax, self.Bu[:, :, list(idx)], self.Lf, self.lagged_outputs, self.dt_s, self.n_rigid)
+
+    def select_outputs(self, names: Sequence[str]) -> "StepTerms":
+        """The terms keeping only the lagged outputs among ``names``."""
+        keep = [i for i, n in enumerate(self.lagged_outputs) if n in names]
+        return StepTerms(self.Ax, self.Bu, self.Lf[keep], tuple(self.lagged_outputs[i] for i in keep), self.dt_s,
+                         self.n_rigid)
 
 
 @dataclass(frozen=True, eq=False)
@@ -31,6 +96,9 @@ class LinearModel:
         The operating point (``fdi_sim.operating_point.OperatingPoint``) or None.
     meta : dict
         Free-form provenance (method, aircraft, jsbsim version).
+    step : StepTerms or None
+        How the derivatives build up within JSBSim's step (continuous models from the
+        linearizer); the input of ``discretize(..., method="step")``.
     """
 
     A: NDArray[np.float64]
@@ -47,6 +115,7 @@ class LinearModel:
     y0: NDArray[np.float64] | None = None
     op: Any = None
     meta: dict[str, Any] = field(default_factory=dict)
+    step: StepTerms | None = None
 
     def __post_init__(self) -> None:
         A, B, C, D = (np.atleast_2d(np.asarray(M, dtype=float)) for M in (self.A, self.B, self.C, self.D))
@@ -72,6 +141,14 @@ class LinearModel:
             v = np.zeros(size) if v is None else np.asarray(v, dtype=float).reshape(size)
             v.setflags(write=False)
             object.__setattr__(self, key, v)
+        st = self.step
+        if st is not None:
+            if st.Ax.shape[2] != n or st.Bu.shape[2] != m or st.n_rigid > n:
+                raise ValueError(f"step terms Ax{st.Ax.shape} Bu{st.Bu.shape} do not fit a model with {n} states "
+                                 f"and {m} inputs")
+            missing = [o for o in st.lagged_outputs if o not in self.output_names]
+            if missing:
+                raise ValueError(f"step terms: lagged outputs {missing} are not model outputs")
 
     @property
     def n_states(self) -> int:

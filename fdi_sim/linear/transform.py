@@ -15,7 +15,7 @@ from fdi_sim.linear.model import LinearModel
 #: default detector rate: the simulation's 120 Hz
 DEFAULT_DT_S: float = 1.0 / 120.0
 #: discretization methods of :func:`discretize`
-DISCRETIZATIONS: tuple[str, ...] = ("zoh", "euler")
+DISCRETIZATIONS: tuple[str, ...] = ("zoh", "euler", "step")
 
 
 def discretize(model: LinearModel, dt_s: float = DEFAULT_DT_S, method: str = "zoh",
@@ -29,15 +29,19 @@ def discretize(model: LinearModel, dt_s: float = DEFAULT_DT_S, method: str = "zo
     dt_s : float
         Sample time [s].
     method : str
-        ``"zoh"`` (zero-order hold, exact for a held input; the default) or ``"euler"``
-        (``A_d = I + dt A``, ``B_d = dt B``). fdi-sim runs JSBSim with third-order Adams-Bashforth
+        ``"zoh"`` (zero-order hold, exact for a held input; the default), ``"euler"``
+        (``A_d = I + dt A``, ``B_d = dt B``) or ``"step"``: the discrete model of JSBSim's own
+        step (:func:`fdi_sim.linear.step.step_model`: AB3 integration, one-pass delays of the FCS
+        and of the aero model, engines inside the pass, accelerometers one step late), only at
+        the simulation step and only for models with step terms; it has more states. fdi-sim runs JSBSim with third-order Adams-Bashforth
         on all four integrators (``Aircraft.__init__``); with it the ZOH model follows the
         simulation at its own step (DHC-6 5000 ft / 120 KCAS doublets without the throttle run:
         ``p_radps`` error 1.6 % with ZOH, 14.7 % with Euler). ``"euler"`` matches JSBSim's
         default rectangular-Euler rate integration, which takes about ``omega^2 dt / 2`` of
         damping out of an oscillatory mode.
     lag_outputs : bool
-        Delay the outputs in ``model.meta["lagged_outputs"]`` by one step (see below).
+        Delay the outputs in ``model.meta["lagged_outputs"]`` by one step (see below; the
+        ``"step"`` model always does).
 
     Notes
     -----
@@ -60,11 +64,15 @@ def discretize(model: LinearModel, dt_s: float = DEFAULT_DT_S, method: str = "zo
         if abs(model.dt_s - dt_s) > 1e-12:
             raise DesignError(f"model is already discrete at {model.dt_s} s; discretize the continuous model at {dt_s} s")
         return model
+    if method == "step":
+        from fdi_sim.linear.step import step_model
+
+        return step_model(model, dt_s)
     if method == "zoh":
         d = model.discretize(dt_s)
     else:  # x_{k+1} = x_k + dt (A x_k + B u_k)
         d = replace(model, A=np.eye(model.n_states) + dt_s * model.A, B=dt_s * model.B, dt_s=dt_s,
-                    meta={**model.meta, "discretized": "euler"})
+                    meta={**model.meta, "discretized": "euler"}, step=None)
     lag = [model.output_names.index(n) for n in model.meta.get("lagged_outputs", ()) if n in model.output_names]
     if not lag or not lag_outputs:
         return d
@@ -107,10 +115,13 @@ def select(model: LinearModel, outputs: Sequence[str] | None = None, inputs: Seq
         return [have.index(n) for n in names]
 
     io, ii = idx(outputs, model.output_names, "outputs"), idx(inputs, model.input_names, "inputs")
+    out_names = tuple(model.output_names[i] for i in io)
+    step = model.step.select_inputs(ii).select_outputs(out_names) if model.step is not None else None
     return replace(
         model, B=model.B[:, ii], C=model.C[io], D=model.D[np.ix_(io, ii)],
-        input_names=tuple(model.input_names[i] for i in ii), output_names=tuple(model.output_names[i] for i in io),
+        input_names=tuple(model.input_names[i] for i in ii), output_names=out_names,
         input_kinds=tuple(model.input_kinds[i] for i in ii), u0=model.u0[ii], y0=model.y0[io], meta=dict(model.meta),
+        step=step,
     )
 
 
@@ -118,7 +129,8 @@ def drop_states(model: LinearModel, names: Sequence[str], rtol: float = 1e-3) ->
     """Remove states that no other state and no output depends on (e.g. ``psi_rad`` when heading is unused).
 
     A state ``j`` may be dropped only if column ``j`` of ``A`` (rows of the kept states) and of
-    ``C`` is negligible: ``|M[i, j]| <= rtol * max_k |M[i, k]|`` for every such row ``i``.
+    ``C`` is negligible: ``|M[i, j]| <= rtol * max_k |M[i, k]|`` for every such row ``i``. The
+    step terms are dropped with it (the step model needs every integrated state).
 
     Raises
     ------
@@ -138,5 +150,5 @@ def drop_states(model: LinearModel, names: Sequence[str], rtol: float = 1e-3) ->
                                   f"({M[i, j]:.3g}); drop the output first or keep the state")
     return replace(
         model, A=model.A[np.ix_(keep, keep)], B=model.B[keep], C=model.C[:, keep],
-        state_names=tuple(model.state_names[i] for i in keep), x0=model.x0[keep], meta=dict(model.meta),
+        state_names=tuple(model.state_names[i] for i in keep), x0=model.x0[keep], meta=dict(model.meta), step=None,
     )

@@ -139,10 +139,7 @@ def simulate_linear(model: LinearModel, du: NDArray[np.float64], engine_lag: Eng
     xs = np.empty((du.shape[0], model.n_states))
     A, B = model.A, model.B
     if engine_lag is None:
-        for k in range(du.shape[0]):
-            xs[k] = x
-            x = A @ x + B @ du[k]
-        return xs @ model.C.T + du @ model.D.T
+        return _simulate_batch(model, du[None])[0]
     i, j, K = _lag_row(model, engine_lag)
     r_up, r_down = math.exp(-model.dt_s / engine_lag.tau_up_s), math.exp(-model.dt_s / engine_lag.tau_down_s)
     for k in range(du.shape[0]):
@@ -153,6 +150,20 @@ def simulate_linear(model: LinearModel, du: NDArray[np.float64], engine_lag: Eng
         # FGTurboProp ExpSeek: N1 <- T + (N1 - T) exp(-dt / tau), tau by the direction of travel
         x[i] = target + (z - target) * (r_up if z < target else r_down)
     return xs @ model.C.T + du @ model.D.T
+
+
+def _simulate_batch(model: LinearModel, du: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`simulate_linear` of several equally long input sequences at once, ``du`` (R, N, m) -> (R, N, p)."""
+    R, N, _ = du.shape
+    bu = np.einsum("rkm,nm->knr", du, model.B)  # B u_k for every run, (N, n, R)
+    A = model.A
+    x = np.zeros((model.n_states, R))
+    xs = np.empty((N, model.n_states, R))
+    for k in range(N):  # x_{k+1} = A x_k + B u_k, all runs as the columns of one matrix
+        xs[k] = x
+        x = A @ x
+        x += bu[k]
+    return np.einsum("knr,pn->rkp", xs, model.C) + np.einsum("rkm,pm->rkp", du, model.D)
 
 
 def _lag_row(model: LinearModel, lag: EngineLag) -> tuple[int, int, float]:
@@ -304,14 +315,16 @@ def compare(model_d: LinearModel, runs: DoubletRuns, engine_lag: bool = False) -
     if tuple(model_d.output_names) != tuple(runs.output_names):
         raise DesignError(f"model outputs {model_d.output_names} differ from the runs' {runs.output_names}")
     lag = runs.engine_lag if engine_lag else None
-    y_lin = []
-    for name, u in zip(runs.input_names, runs.du):
+    U = np.zeros((len(runs.doublets), runs.du.shape[1], model_d.n_inputs))
+    for r, (name, u) in enumerate(zip(runs.input_names, runs.du)):
         if name not in model_d.input_names:
             raise DesignError(f"doublet input {name!r} is not a model input ({', '.join(model_d.input_names)})")
-        U = np.zeros((len(u), model_d.n_inputs))
-        U[:, model_d.input_names.index(name)] = u
-        y_lin.append(simulate_linear(model_d, U, lag))
-    return ValidationResult(runs=runs, y_lin=np.array(y_lin), engine_lag=lag)
+        U[r, :, model_d.input_names.index(name)] = u
+    if lag is None:
+        y_lin = _simulate_batch(model_d, U)
+    else:
+        y_lin = np.array([simulate_linear(model_d, Ur, lag) for Ur in U])
+    return ValidationResult(runs=runs, y_lin=y_lin, engine_lag=lag)
 
 
 def default_doublets(model: LinearModel, settings: ValidationSettings) -> tuple[DoubletSpec, ...]:
