@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
         def progress(i: int, total: int, pt: Any) -> None:
             if args.quiet:
                 return
-            v = pt.info.get("validation", {}).get("zoh")
+            val = pt.info.get("validation", {})
+            v = val.get("step") or val.get("zoh")
             extra = f"worst {v['worst_output']} {v['worst']:.1%}" if v else pt.reason
             print(f"  [{i:3d}/{total}] {pt.op.label():42s} {pt.status:12s} {extra}", flush=True)
 

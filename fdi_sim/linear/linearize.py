@@ -25,7 +25,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 import fdi_sim
-from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, PassJacobians, central_difference
+from fdi_sim.aircraft.linearize import (
+    STATE_PROBES, BodyJacobians, FDSettings, PassJacobians, central_difference, slope_jumps,
+)
 from fdi_sim.aircraft.linearize_fglin import JsbsimLinearization, fglinearization
 from fdi_sim.aircraft.linearize_state import LAGGED_OUTPUTS, TrimState, capture_trim, has_propeller
 from fdi_sim.aircraft.model import AIRCRAFT, Aircraft
@@ -335,8 +337,38 @@ def _point_info(ac: Aircraft, lp: LinearizedPoint, validation: ValidationSetting
             meth = "step" if m.step is not None else "zoh"
             md = models.get(meth) or discretize(m, ac.dt_s, method=meth)
             info["validation_engine_lag"] = {**_validation_info(compare(md, runs, engine_lag=True)), "method": meth}
+            info["engine_lag"] = {"tau_up_s": runs.engine_lag.tau_up_s, "tau_down_s": runs.engine_lag.tau_down_s}
+        info["nonsmooth"] = nonsmooth(ac, lp.trim_state, runs)
         info["timing_s"]["validate"] = time.perf_counter() - t0
     return info
+
+
+#: a slope jump (:func:`~fdi_sim.aircraft.linearize.slope_jumps`) at least this large within a
+#: doublet's excursion is reported as a non-smoothness of JSBSim's model there [-]
+NONSMOOTH_JUMP: float = 0.05
+
+
+def nonsmooth(ac: Aircraft, ts: TrimState, runs: Any) -> dict[str, dict[str, float]]:
+    """Slope jumps of JSBSim's model within the excursions of the doublet runs.
+
+    Probes: every doublet input except the throttle (its non-smoothness is the engine lag) and
+    the extra disturbances, with the doublet amplitude; and the states alpha, beta, p, q, r with
+    their largest excursion over all runs.
+
+    Returns
+    -------
+    dict
+        ``probe -> {"excursion": a, "jump": relative slope jump}`` [units of the probe, -].
+    """
+    from fdi_sim.aircraft.linearize_state import CONTROL_INPUTS, GUST_INPUTS
+
+    probes = {d.input_name: d.amplitude for d in runs.doublets
+              if d.input_name in CONTROL_INPUTS + GUST_INPUTS and d.input_name != "throttle_cmd_norm"}
+    for name in STATE_PROBES:
+        if name in runs.output_names:
+            probes[name] = float(np.max(np.abs(runs.dy[:, :, runs.output_names.index(name)])))
+    jumps = slope_jumps(ac, ts, probes)
+    return {k: {"excursion": float(probes[k]), "jump": v} for k, v in jumps.items()}
 
 
 #: discretizations validated by :func:`linearize_grid` by default: the detectors' ZOH model and the
@@ -408,16 +440,23 @@ def linearize_grid(grid: GridSpec, settings: FDSettings | None = None, validate:
             progress(i + 1, len(grid.points), points[-1])
     names: dict[str, Any] = {}
     arrays = {k: np.zeros((0, 0)) for k in ARRAYS}
+    step_meta: dict[str, Any] = {}
     if models:
         m0 = models[0]
         names = {"state_names": m0.state_names, "input_names": m0.input_names, "input_kinds": m0.input_kinds,
                  "output_names": m0.output_names, "lagged_outputs": tuple(m0.meta.get("lagged_outputs", ()))}
         arrays = {k: np.array([getattr(m, k) for m in models]) for k in ARRAYS}
+        steps = [m.step for m in models]
+        if all(st is not None for st in steps) and len({(st.Ax.shape, st.lagged_outputs) for st in steps}) == 1:
+            arrays.update(step_Ax=np.array([st.Ax for st in steps]), step_Bu=np.array([st.Bu for st in steps]),
+                          step_Lf=np.array([st.Lf for st in steps]))
+            step_meta = {"step": {"dt_s": steps[0].dt_s, "n_rigid": steps[0].n_rigid,
+                                  "lagged_outputs": list(steps[0].lagged_outputs)}}
     meta = {
         "created_by": f"fdi-sim {fdi_sim.__version__}", "grid_source": grid.source,
         "jsbsim_version": ac.fdm.get_version() if ac is not None else "", "fd_settings": asdict(s),
         "validation": {**asdict(grid.validation), "methods": list(methods) if validate else []},
         "envelope": {k: list(v) for k, v in grid.envelope.limits.items()}, "envelope_why": grid.envelope.why,
-        "elapsed_s": time.perf_counter() - t_start,
+        "elapsed_s": time.perf_counter() - t_start, **step_meta,
     }
     return ModelSchedule(grid.aircraft, points, arrays, names, meta)

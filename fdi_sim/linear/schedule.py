@@ -13,6 +13,11 @@ File format (``.npz``, numpy, no pickle; loads in milliseconds)
           (-1 for points without a model).
 ``A, B, C, D, x0, u0, y0``  stacked continuous-time matrices and trim values of the points with
           a model, shapes (K, n, n), (K, n, m), (K, p, n), (K, p, m), (K, n), (K, m), (K, p).
+``step_Ax, step_Bu, step_Lf``  (optional) the step terms of every model
+          (:class:`~fdi_sim.linear.model.StepTerms`: how the derivatives build up within JSBSim's
+          step), shapes (K, P, r, n), (K, P, r, m), (K, q, r); ``meta`` holds their step
+          ``step_dt_s``, ``n_rigid`` and ``lagged_outputs``. With them ``method="step"`` gives the
+          discrete model of the simulation step (at the simulation's ``dt_s`` only).
 
 Lookup
 ------
@@ -40,7 +45,7 @@ from numpy.typing import NDArray
 
 from fdi_sim.errors import DesignError
 from fdi_sim.isa import vc_from_vt
-from fdi_sim.linear.model import LinearModel
+from fdi_sim.linear.model import LinearModel, StepTerms
 from fdi_sim.linear.transform import DEFAULT_DT_S, discretize
 from fdi_sim.operating_point import OperatingPoint
 
@@ -54,6 +59,8 @@ _MIN_SPACING: dict[str, float] = {"h_ft": 1000.0, "vc_kts": 10.0, "flaps_deg": 1
 MAX_DISTANCE: float = 1.5
 #: the stacked arrays of a schedule file
 ARRAYS: tuple[str, ...] = ("A", "B", "C", "D", "x0", "u0", "y0")
+#: the optional stacked step terms (present when every model has them, with the same passes)
+STEP_ARRAYS: tuple[str, ...] = ("step_Ax", "step_Bu", "step_Lf")
 
 
 @dataclass(frozen=True)
@@ -149,11 +156,12 @@ class ModelSchedule:
     points : sequence of SchedulePoint
         Every grid point, with or without a model.
     arrays : mapping
-        ``A, B, C, D, x0, u0, y0`` stacked over the points with a model.
+        ``A, B, C, D, x0, u0, y0`` stacked over the points with a model (and optionally
+        :data:`STEP_ARRAYS`).
     names : mapping
         ``state_names``, ``input_names``, ``input_kinds``, ``output_names``, ``lagged_outputs``.
     meta : mapping
-        Provenance.
+        Provenance; ``step`` (``dt_s``, ``n_rigid``, ``lagged_outputs``) with step arrays.
     """
 
     def __init__(self, aircraft: str, points: Sequence[SchedulePoint], arrays: Mapping[str, NDArray[np.float64]],
@@ -184,15 +192,27 @@ class ModelSchedule:
             raise DesignError(f"point {i} ({p.op.label()}) has no model: {p.status}, {p.reason}")
         return self._model(self._blend([p.index], [1.0]), p.op)
 
+    @property
+    def has_step(self) -> bool:
+        """True when the models carry step terms (``method="step"`` works)."""
+        return all(k in self.arrays for k in STEP_ARRAYS) and "step" in self.meta
+
     def _blend(self, rows: Sequence[int], w: Sequence[float]) -> dict[str, NDArray[np.float64]]:
-        return {k: sum(wi * self.arrays[k][r] for r, wi in zip(rows, w)) for k in ARRAYS}
+        keys = ARRAYS + (STEP_ARRAYS if self.has_step else ())
+        return {k: sum(wi * self.arrays[k][r] for r, wi in zip(rows, w)) for k in keys}
 
     def _model(self, m: Mapping[str, NDArray[np.float64]], op: OperatingPoint | None) -> LinearModel:
+        step = None
+        if self.has_step:
+            st = self.meta["step"]
+            step = StepTerms(Ax=m["step_Ax"], Bu=m["step_Bu"], Lf=m["step_Lf"], lagged_outputs=tuple(st["lagged_outputs"]),
+                             dt_s=float(st["dt_s"]), n_rigid=int(st["n_rigid"]))
         return LinearModel(
             A=m["A"], B=m["B"], C=m["C"], D=m["D"], dt_s=0.0, state_names=self.names["state_names"],
             input_names=self.names["input_names"], output_names=self.names["output_names"],
             input_kinds=self.names["input_kinds"], x0=m["x0"], u0=m["u0"], y0=m["y0"], op=op,
             meta={"aircraft": self.aircraft, "lagged_outputs": list(self.names.get("lagged_outputs", ()))},
+            step=step,
         )
 
     # ------------------------------------------------------------------ lookup
@@ -216,7 +236,8 @@ class ModelSchedule:
         dt_s : float
             Detector sample time [s] (default 1/120 s, the simulation's rate).
         method : str
-            ``"zoh"`` or ``"euler"`` (see :func:`fdi_sim.linear.transform.discretize`).
+            ``"zoh"``, ``"euler"`` or ``"step"`` (the model of the simulation step, at its
+            ``dt_s`` only; see :func:`fdi_sim.linear.transform.discretize`).
         interpolate : bool
             Blend the enclosing triangle's models instead of taking the nearest.
         max_distance : float
@@ -322,7 +343,7 @@ class ModelSchedule:
         try:
             with np.load(p, allow_pickle=False) as z:
                 meta = json.loads(str(z["meta"]))
-                arrays = {k: z[k] for k in ARRAYS}
+                arrays = {k: z[k] for k in ARRAYS + STEP_ARRAYS if k in z.files or k in ARRAYS}
         except FileNotFoundError:
             raise DesignError(f"schedule file {p} not found; create it with `fdi-sim linearize`") from None
         except (OSError, KeyError, ValueError, json.JSONDecodeError) as exc:
