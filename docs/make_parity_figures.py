@@ -1,12 +1,13 @@
 """Figures and tables for docs/parity.md (parity family: Hagenblad F-16 study, robust parity).
 
-Run from the repository root:  .venv/bin/python docs/make_parity_figures.py [f16] [readings] [robust]
-(about a minute for all three parts).
+Run from the repository root:  .venv/bin/python docs/make_parity_figures.py [f16] [readings] [robust] [dhc6]
+(about a minute for the first three parts; dhc6 flies 176 two-minute JSBSim flights, about 13 min).
 Writes docs/figures/parity_*.png and prints every number quoted in docs/parity.md.
 """
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -17,6 +18,8 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Ellipse  # noqa: E402
 from scipy.spatial import ConvexHull  # noqa: E402
 
+from fdi_sim.detectors.dhc6_icing_flights import FlightPlan, StudyConfig, fly_all, linearize_models  # noqa: E402
+from fdi_sim.detectors.dhc6_icing_study import evaluate  # noqa: E402
 from fdi_sim.detectors.hagenblad_f16 import (  # noqa: E402
     PAPER_P_EQ28,
     PAPER_READING,
@@ -218,11 +221,114 @@ def robust_figures(rng):
     plt.close(fig)
 
 
+#: the two conditions of the DHC-6 study, chosen on clean flights only (docs/parity.md)
+DHC6_CONDITIONS = {"light turbulence, 2 deg bias": StudyConfig(turbulence="light", fault_bias_deg=2.0),
+                   "calm air, 0.25 deg bias": StudyConfig(turbulence="none", fault_bias_deg=0.25)}
+DHC6_SETS = ("nominal", "robust", "robust+trim", "robust-clean")
+DHC6_P = (1, 2, 3, 4, 6, 8, 11, 14, 17, 20, 24)
+
+
+def _fa(fa):
+    return f"{fa.rate:.3f} [{fa.ci[0]:.3f}, {fa.ci[1]:.3f}]"
+
+
+def dhc6_study(rng):
+    """Nominal vs robust relations on JSBSim DHC-6 flights, clean and iced; tables, figures."""
+    results, curves = {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, cfg in DHC6_CONDITIONS.items():
+            ms = linearize_models(cfg)
+            flights = fly_all(cfg, FlightPlan(), Path(tmp) / cfg.turbulence)
+            res = results[label] = evaluate(cfg, ms, flights, rng)
+            clean = ms.lon[0]
+            print(f"\n== DHC-6 {label}: {len(flights['eta0.1'])} x {cfg.duration_s:g} s per fault-free group ==")
+            print("pitch trims", np.round(ms.pitch_trim_cmd_norm, 4), " u0 (elevator rad, throttle):",
+                  [np.round(m.u0[:2], 4) for m in ms.lon])
+            print("y0 - y0_clean (eta 0.1):", dict(zip(clean.output_names, np.round(ms.lon[2].y0 - clean.y0, 4))))
+            print("noise: sensors", np.round(res.noise.measurement_std, 4), "inputs", np.round(res.noise.input_std, 4),
+                  "gusts", np.round(res.noise.gust_std_fps, 2))
+            for dg in ("fault_eta0", "fault_eta0.1"):
+                print(f"-- thresholds for 0.9 detection on {dg} --")
+                for n in DHC6_SETS:
+                    r = res.results[n]
+                    fa = r.false_alarms
+                    print(f"{n:13s} p={r.n_relations:2d} h={r.threshold[dg]:9.1f} det={r.detection[dg]:.3f} "
+                          f"FA eta0 {_fa(fa[(dg, 'eta0')])}  eta0.05 {_fa(fa[(dg, 'eta0.05')])}  "
+                          f"eta0.1 {_fa(fa[(dg, 'eta0.1')])}  onsets/h eta0.1 {fa[(dg, 'eta0.1')].onsets_per_hour:.0f} "
+                          f"[{fa[(dg, 'eta0.1')].onsets_ci[0]:.0f}, {fa[(dg, 'eta0.1')].onsets_ci[1]:.0f}] "
+                          f"({fa[(dg, 'eta0.1')].hours:.2f} h)")
+            print("-- residual shift per window (whitened): measured |mean z|^2 / predicted |W P' m_q|^2 / tr Cov z --")
+            for n in DHC6_SETS:
+                sh = res.shift[n]
+                print(f"{n:13s} " + "  ".join(f"{g}: {sh[g].measured:8.2f} / {sh[g].predicted:8.2f} / {sh[g].cov_trace:5.1f}"
+                                              for g in ("eta0", "eta0.05", "eta0.1", "fault_eta0")))
+            curves[label] = {p: evaluate(cfg, ms, flights, rng, n_relations=p) for p in DHC6_P}
+            for n in DHC6_SETS[1:]:
+                print(f"FA(eta 0.1) vs p, {n}:",
+                      [round(curves[label][p].results[n].false_alarms[("fault_eta0", "eta0.1")].rate, 3) for p in DHC6_P])
+    fig_dhc6_series(results)
+    fig_dhc6_curves(results, curves)
+
+
+def fig_dhc6_series(results):
+    fig, axes = plt.subplots(2, 2, figsize=(13, 7.5), sharey=True)
+    colors = {"nominal": "k", "robust": "tab:blue", "robust+trim": "tab:orange"}
+    for row, (label, res) in zip(axes, results.items()):
+        for ax, group in zip(row, ("eta0.1", "fault_eta0.1")):
+            for n, c in colors.items():
+                t_s, t = res.series[n][group][0]
+                h = res.results[n].threshold["fault_eta0"]
+                ax.semilogy(t_s, np.maximum(t / h, 1e-3), color=c, lw=0.8,
+                            label=f"{n} (p = {res.results[n].n_relations}, h = {h:.0f})")
+            ax.axhline(1.0, color="r", ls="--", lw=1, label="threshold (t = h)")
+            if group.startswith("fault"):
+                ax.axvspan(res.cfg.fault_start_s, res.cfg.duration_s, color="r", alpha=0.08,
+                           label=f"elevator bias {res.cfg.fault_bias_deg:g} deg active")
+            ax.set_title(f"{label}: eta 0.1, {'elevator fault' if group.startswith('fault') else 'fault-free'}",
+                         fontsize=9)
+            ax.set_xlabel("t [s]")
+            ax.grid(alpha=0.3, which="both")
+        row[0].set_ylabel("t / h (1 s moving-average chi-square)")
+        row[1].legend(fontsize=7, loc="lower right")
+    fig.suptitle("DHC-6, 5000 ft / 100 KIAS, JSBSim with the icing overlay at eta 0.1 from t = 0: test statistic over "
+                 "its threshold (set for 0.9 detection of the bias on clean flights)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(OUT / "parity_dhc6_iced.png", dpi=110)
+    plt.close(fig)
+
+
+def fig_dhc6_curves(results, curves):
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.5), sharey=True)
+    colors = {"robust": "tab:blue", "robust+trim": "tab:orange", "robust-clean": "tab:green"}
+    key = ("fault_eta0", "eta0.1")
+    for ax, (label, res) in zip(axes, results.items()):
+        nom = res.results["nominal"].false_alarms[key]
+        ax.axhspan(nom.ci[0], nom.ci[1], color="k", alpha=0.12)
+        ax.axhline(nom.rate, color="k", label=f"nominal parity space (p = {res.results['nominal'].n_relations})")
+        for n, c in colors.items():
+            fa = [curves[label][p].results[n].false_alarms[key] for p in DHC6_P]
+            rate = np.array([f.rate for f in fa])
+            err = np.array([[f.rate - f.ci[0], f.ci[1] - f.rate] for f in fa]).T
+            ax.errorbar(DHC6_P, rate, yerr=err, color=c, marker="o", ms=4, capsize=2, label=n)
+        ax.axvline(res.results["nominal"].n_relations, color="gray", ls=":", lw=1)
+        ax.set_xlabel("number of relations p")
+        ax.set_title(label, fontsize=10)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("false-alarm probability per sample, eta 0.1")
+    axes[0].legend(fontsize=8)
+    fig.suptitle("False alarms on fault-free iced flight at 0.9 detection of the elevator bias on clean flights "
+                 "(95 % intervals over flights); p = 17 (dotted) was fixed before the iced flights were evaluated",
+                 fontsize=9)
+    fig.tight_layout()
+    fig.savefig(OUT / "parity_dhc6_fa_vs_p.png", dpi=110)
+    plt.close(fig)
+
+
 def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(2024)
     reading = f16_reading(*PAPER_READING)
-    parts = set(sys.argv[1:]) or {"f16", "readings", "robust"}
+    parts = set(sys.argv[1:]) or {"f16", "readings", "robust", "dhc6"}
     if "f16" in parts:
         fig_f16(reading, rng)
         fig_pca(reading, rng)
@@ -230,6 +336,8 @@ def main() -> None:
         readings_table(rng)
     if "robust" in parts:
         robust_figures(rng)
+    if "dhc6" in parts:
+        dhc6_study(np.random.default_rng(2026))
 
 
 if __name__ == "__main__":

@@ -11,8 +11,8 @@ deviation windows ``[Y; U]`` about the clean trim. The designs and statistics ar
 
 Why the known elevator input is an angle and not the raw command: the DHC-6 flight-control
 system scales ``c = elevator_cmd + pitch_trim`` by 0.244 rad per unit trailing-edge down but by
-0.454 rad per unit trailing-edge up (Conventional Controls.xml, :data:`ELEVATOR_RANGE_RAD`), and in light turbulence the autopilot moves ``c``
-across zero about half of the time at 100 KIAS (clean trim c = 0.012). The gearing is known to any
+0.454 rad per unit trailing-edge up (Conventional Controls.xml, :data:`ELEVATOR_RANGE_RAD`), and in light turbulence ``c`` is below zero in a
+third of the steps at 100 KIAS (clean trim c = 0.012). The gearing is known to any
 FCS, so the detector applies it; the linearizer's command column is converted with the slope it
 differenced (:func:`longitudinal_model`). The pitch-trim setting is not logged by the simulation
 (it is not on ``/commands/pilot``); it is recovered from the first, fault-free step of a log as
@@ -87,7 +87,7 @@ class StudyConfig:
     order_s : int
         Parity order s (window of s + 1 samples).
     turbulence : str
-        JSBSim turbulence of the flights (none, light, moderate, severe).
+        JSBSim turbulence of the flights (none, light, moderate, severe; MIL-F-8785C Dryden).
     duration_s : float
         Length of each flight [s].
     skip_s : float
@@ -112,7 +112,7 @@ class StudyConfig:
     turbulence: str = "light"
     duration_s: float = 120.0
     skip_s: float = 5.0
-    fault_bias_deg: float = 0.5
+    fault_bias_deg: float = 2.0
     fault_start_s: float = 30.0
     sensor_biases: bool = False
     average_s: float = 1.0
@@ -164,8 +164,8 @@ def longitudinal_model(model: LinearModel, pitch_trim_cmd_norm: float, step_cmd_
 
     States :data:`LON_STATES`, outputs :data:`LON_OUTPUTS`, inputs :data:`LON_INPUTS`. The lateral
     states are truncated (their coupling into these outputs goes mostly through beta, where the
-    DHC-6 tables have a kink at beta = 0 that turbulence crosses; a linear term there is wrong half
-    of the time). The elevator column is divided by the slope the linearizer differenced,
+    DHC-6 tables have a kink at beta = 0: about the trim's -0.3 deg a linear term has the wrong
+    sign whenever beta > 0, a third of the time in light turbulence). The elevator column is divided by the slope the linearizer differenced,
     ``(g(c0 + h) - g(c0 - h)) / 2h`` with ``c0`` the trim's pitch trim and ``h`` its command step,
     so it acts per radian of commanded elevator; ``u0`` of it is ``g(c0)``.
     """
@@ -234,10 +234,12 @@ class FlightSamples:
     pitch_trim_cmd_norm : float
         Pitch-trim setting recovered from the log [-].
     truth_x : NDArray
-        True longitudinal states at ``t_s`` where the log has them (vt, alpha, q, theta, h; NaN
-        for n1, rpm), (N, 7), for the design's state scaling.
+        True longitudinal states :data:`LON_STATES` at ``t_s`` where the log has them (vt and alpha
+        of the Earth-relative body velocity, q, theta, h; NaN for n1 and rpm), (N, 7), for the
+        design's state scaling.
     gust_body_fps : NDArray
-        Turbulence velocity along body x and z at ``t_s`` (level flight: north, down) [ft/s], (N, 2).
+        Turbulence velocity along body x and z at ``t_s`` (level flight at heading 0: north, down)
+        [ft/s], (N, 2).
     """
 
     t_s: NDArray[np.float64]
@@ -257,6 +259,11 @@ def flight_samples(log: FlightLog, dt_s: float, eta: float, seed: int) -> Flight
     Outputs are taken at ``t_k`` (the sensors are sampled at 40, 60 and 120 Hz, and ``dt_s`` is a
     multiple of all their periods, so each is a fresh sample); inputs are the mean command over
     the simulation steps of ``[t_k, t_k + dt)``.
+
+    Raises
+    ------
+    DesignError
+        ``dt_s`` is not a multiple of the simulation step, or the elevator fault is on at t = 0.
     """
     meas, cmd, surf, truth = (log.topics[t] for t in ("/sensors/measurements", "/commands/pilot", "/truth/surfaces",
                                                        "/truth/state"))
@@ -276,8 +283,15 @@ def flight_samples(log: FlightLog, dt_s: float, eta: float, seed: int) -> Flight
     fault = np.zeros(n, bool)
     if "/faults/active" in log.topics and f"{FAULT_LABEL}_active" in log.topics["/faults/active"].fields:
         fault = log.topics["/faults/active"][f"{FAULT_LABEL}_active"][idx] > 0.5
+        if fault[0]:
+            raise DesignError("the elevator fault is active at t = 0, where the pitch trim is read from the log; "
+                              "start it later (fault_start_s > 0)")
     tx = np.full((n, len(LON_STATES)), np.nan)
-    for j, s in enumerate(LON_STATES[:5]):
+    # the model's vt and alpha are those of the Earth-relative body velocity (the log's vt_fps and
+    # alpha_rad are air-relative, gusts included): Vt = |(u, v, w)|, alpha = atan2(w, u)
+    ub, vb, wb = (truth[f"{c}_body_fps"][idx] for c in "uvw")
+    tx[:, 0], tx[:, 1] = np.sqrt(ub**2 + vb**2 + wb**2), np.arctan2(wb, ub)
+    for j, s in enumerate(LON_STATES[2:5], start=2):
         tx[:, j] = truth[s][idx]
     gust = np.stack([truth["turb_north_fps"][idx], truth["turb_down_fps"][idx]], axis=1)
     return FlightSamples(t_s=cmd.t_s[idx].copy(), y=y, u=u, fault=fault, eta=eta, seed=seed,
@@ -319,7 +333,6 @@ def fly(cfg: StudyConfig, eta: float, seed: int, faulty: bool, out_dir: str | Pa
     if res.status != "completed":
         raise DesignError(f"flight {sc.name} seed {seed} ended {res.status}: {res.summary.reason}")
     return flight_samples(read_log(res.log_path), cfg.dt_s, eta, seed)
-
 
 
 # ---------------------------------------------------------------------------- windows

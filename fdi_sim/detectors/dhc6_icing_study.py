@@ -60,6 +60,7 @@ __all__ = [
     "FalseAlarms",
     "NoiseModel",
     "Relations",
+    "ResidualShift",
     "SetResult",
     "StudyResult",
     "calibrate",
@@ -140,11 +141,13 @@ class NoiseModel:
     measurement_std : NDArray
         Sensor noise of :data:`LON_OUTPUTS` (suite noise and quantization) [signal units].
     input_std : NDArray
-        Known-input deviations (commanded elevator angle [rad], throttle [-]).
+        Standard deviation of the known inputs about their flight mean (commanded elevator angle
+        [rad], throttle [-]).
     gust_std_fps : NDArray
         Body x and z turbulence [ft/s].
     state_sqrt : NDArray
-        Square root of the covariance of the state deviation at a window start.
+        ``M`` with ``M M'`` the second moment of the state deviation from the trim (Lou et al.
+        eq. 14: the state at a window start) [state units].
     """
 
     measurement_std: NDArray[np.float64]
@@ -337,20 +340,43 @@ class SetResult:
     false_alarms: dict[tuple[str, str], FalseAlarms]
 
 
+@dataclass(frozen=True)
+class ResidualShift:
+    """Where the alarms of one relation set on one group come from, in whitened units (per window).
+
+    Attributes
+    ----------
+    measured : float
+        ``|mean z|^2``: squared mean of the whitened residual over the group's windows (fault-free
+        groups: all windows; faulty groups: the windows in the fault interval) [-].
+    predicted : float
+        ``|W P' m_q|^2``: the same predicted from the linear models' trims (:func:`trim_offset_window`)
+        for a fault-free group at eta_q; NaN for faulty groups [-].
+    cov_trace : float
+        ``tr Cov z`` over the group (the number of relations on clean flight) [-].
+    """
+
+    measured: float
+    predicted: float
+    cov_trace: float
+
+
 @dataclass(frozen=True, eq=False)
 class StudyResult:
     """Everything the docs report: designs, noise levels, results per relation set, statistic series.
 
-    ``series[name][group]`` is a list of ``(t_s, t)`` per flight for the figures.
+    ``series[name][group]`` is a list of ``(t_s, t)`` per flight for the figures;
+    ``shift[name][group]`` the :class:`ResidualShift`.
     """
 
     cfg: StudyConfig
     models: ModelSet
     noise: NoiseModel
     relations: dict[str, Relations]
+    calibration: dict[str, Calibration]
     results: dict[str, SetResult]
     series: dict[str, dict[str, list[tuple[NDArray, NDArray]]]]
-    fault_fraction: dict[str, NDArray]
+    shift: dict[str, dict[str, ResidualShift]]
 
 
 def evaluate(cfg: StudyConfig, ms: ModelSet, flights: dict[str, list[FlightSamples]], rng: np.random.Generator,
@@ -359,7 +385,8 @@ def evaluate(cfg: StudyConfig, ms: ModelSet, flights: dict[str, list[FlightSampl
 
     Detection is the fraction of windows with ``t > h`` among the windows that lie wholly in the
     fault interval; false alarms are counted on every window (after ``cfg.skip_s``) of the
-    fault-free groups.
+    fault-free groups (``eta<e>``, flown at eta = e, see
+    :func:`~fdi_sim.detectors.dhc6_icing_flights.fly_all`).
     """
     clean = ms.lon[0]
     nm = noise_model(flights["train"], clean, cfg.skip_s)
@@ -369,11 +396,19 @@ def evaluate(cfg: StudyConfig, ms: ModelSet, flights: dict[str, list[FlightSampl
     win = {g: [windows(f, clean, cfg.order_s, cfg.skip_s) for f in fl] for g, fl in flights.items() if g != "train"}
     det_groups = [g for g in win if g.startswith("fault_")]
     test_groups = [g for g in win if not g.startswith("fault_")]
-    results, series = {}, {}
+    offsets = {g: trim_offset_window(ms.lon[ms.etas.index(float(g[3:]))], clean, cfg.order_s) for g in test_groups}
+    results, series, cals, shift = {}, {}, {}, {}
     for name, rel in rels.items():
-        cal = calibrate(rel, X_train)
+        cal = cals[name] = calibrate(rel, X_train)
         t = {g: [statistics(rel, cal, X, n_avg) for X, _, _ in win[g]] for g in win}
         series[name] = {g: [(tw, tt) for (_, _, tw), tt in zip(win[g], t[g])] for g in win}
+        shift[name] = {}
+        for g in win:
+            X = np.vstack([w[0][w[1]] if g in det_groups else w[0] for w in win[g]])
+            z = (X @ rel.P - cal.mean) @ cal.whiten.T
+            pred = (offsets[g] @ rel.P) @ cal.whiten.T if g in offsets else np.full(rel.n_relations, np.nan)
+            shift[name][g] = ResidualShift(measured=float(np.sum(z.mean(0) ** 2)), predicted=float(np.sum(pred**2)),
+                                           cov_trace=float(np.trace(np.atleast_2d(np.cov(z.T)))))
         thr, det, fa = {}, {}, {}
         for dg in det_groups:
             tf = np.concatenate([tt[f] for tt, (_, f, _) in zip(t[dg], win[dg])])
@@ -382,8 +417,8 @@ def evaluate(cfg: StudyConfig, ms: ModelSet, flights: dict[str, list[FlightSampl
             for tg in test_groups:
                 fa[(dg, tg)] = false_alarm_rate(t[tg], h, cfg.dt_s, rng)
         results[name] = SetResult(name=name, n_relations=rel.n_relations, threshold=thr, detection=det, false_alarms=fa)
-    ff = {g: np.array([np.mean(f) for _, f, _ in win[g]]) for g in det_groups}
-    return StudyResult(cfg=cfg, models=ms, noise=nm, relations=rels, results=results, series=series, fault_fraction=ff)
+    return StudyResult(cfg=cfg, models=ms, noise=nm, relations=rels, calibration=cals, results=results, series=series,
+                       shift=shift)
 
 
 def run_study(cfg: StudyConfig, plan: FlightPlan, out_dir: str | Path, rng: np.random.Generator,
