@@ -632,7 +632,10 @@ def slope_jumps(ac: Aircraft, ts: TrimState, probes: Mapping[str, float],
     if not ends:
         return {}
     change = np.array([np.abs(fp - fm) / 2 for fp, fm in ends.values()])  # |s| a per probe and row
-    big = change >= 0.2 * np.max(change, axis=0)
+    # rows that matter for a probe: 20 % of what any probe does there, and 10 % of the probe's own
+    # largest effect with the rows weighted as in the trim (ft/s^2; rad/s^2 x 100)
+    weighted = change * np.array([1.0, 1.0, 1.0, 100.0, 100.0, 100.0])
+    big = (change >= 0.2 * np.max(change, axis=0)) & (weighted >= 0.1 * np.max(weighted, axis=1, keepdims=True))
     out = {}
     for k, (name, (fp, fm)) in enumerate(ends.items()):
         a = float(probes[name])

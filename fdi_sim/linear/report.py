@@ -157,8 +157,13 @@ def _bar_lines(schedule: ModelSchedule) -> list[str]:
              "points pass" + ("; the others, with what JSBSim does there that no linear model holds:" if miss else "")]
     for p, v in miss:
         causes = nonsmooth_causes(p)
+        lagv = p.info.get(ENGINE_LAG_KEY)
+        with_lag = ""
+        if lagv:
+            with_lag = ("; with the identified N1 lag it passes" if lagv.get("passed") else
+                        f"; with the identified N1 lag {lagv['worst_output']} {lagv['worst']:.1%}")
         lines.append(f"  - {p.op.label()}: {v['worst_output']} {v['worst']:.1%} (without the throttle run "
-                     f"{v['worst_output_without_throttle']} {v['worst_without_throttle']:.1%}); "
+                     f"{v['worst_output_without_throttle']} {v['worst_without_throttle']:.1%}{with_lag}); "
                      + ("; ".join(causes) if causes else "no slope jump found within the doublets"))
     return lines
 

@@ -22,12 +22,17 @@ every output of the throttle run). The linear model's ``n1_pct`` row holds the m
 asymmetric lag identified from JSBSim at the trim
 (:func:`~fdi_sim.aircraft.linearize_response.identify_engine_lag`), which tells whether the rest
 of the model (propeller, airframe, outputs) is right; ``compare(...)`` scores the linear model
-as it is.
+as it is. In the step model (:mod:`fdi_sim.linear.step`) the N1 state is the value of the
+previous step and the forces of a step use the linear in-pass update; the lag replaces the value
+carried to the next step, so the forces see the asymmetric N1 one step late (a difference of
+``dt |1/tau_up - 1/tau_down| / 2``, 0.25 %, of the N1 excursion for that one step).
 
 Timing convention (that of the simulation loop and of the detectors): the input row ``u_k`` is
 set before JSBSim step ``k``; the outputs read after the step are ``y_k = C x_k + D u_k`` with
 ``x_{k+1} = A_d x_k + B_d u_k`` and ``x_0 = 0`` (JSBSim integrates at the start of a step with the
-derivatives of the previous one, then evaluates forces with the new input).
+derivatives of the previous ones, then evaluates forces with the new input). Any discrete model
+can be scored: ZOH (the detectors' default) or the step model of JSBSim's own step, on which the
+bar is judged (``fdi_sim.linear.report.bar_method``).
 """
 from __future__ import annotations
 

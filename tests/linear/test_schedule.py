@@ -126,3 +126,36 @@ def test_tracker_follows_the_air_data_with_hysteresis() -> None:
     y[2] = np.nan
     with pytest.raises(DesignError, match="non-finite air data"):
         tr.step(0.04, np.zeros(2), y)
+
+
+def _with_step(s: ModelSchedule) -> ModelSchedule:
+    """The same schedule with step terms: two passes building up to A, B (both states integrated)."""
+    K = s.arrays["A"].shape[0]
+    Ax = np.stack([np.stack([0.5 * s.arrays["A"][k], s.arrays["A"][k]]) for k in range(K)])
+    Bu = np.stack([np.stack([0.3 * s.arrays["B"][k], s.arrays["B"][k]]) for k in range(K)])
+    Lf = np.tile(np.array([[0.0, 0.2]]), (K, 1, 1))
+    arrays = {**s.arrays, "step_Ax": Ax, "step_Bu": Bu, "step_Lf": Lf}
+    meta = {**s.meta, "step": {"dt_s": 1 / 120, "n_rigid": 2, "lagged_outputs": ["nz_g"]}}
+    return ModelSchedule(s.aircraft, s.points, arrays, s.names, meta)
+
+
+def test_step_terms_round_trip_and_lookup(tmp_path: Path) -> None:
+    """Schedules carry the step terms when the models have them; older files without them still load."""
+    from fdi_sim.linear.step import step_model
+
+    s = _with_step(make_schedule())
+    s2 = ModelSchedule.load(s.save(tmp_path / "with_step.npz"))
+    assert s2.has_step
+    for k in ("step_Ax", "step_Bu", "step_Lf"):
+        np.testing.assert_array_equal(s2.arrays[k], s.arrays[k])
+    op = OperatingPoint("f16", 10000.0, vc_kts=300.0)
+    got = s2.model_at(op, method="step").model
+    want = step_model(s2.continuous(4))
+    assert got.dt_s == pytest.approx(1 / 120) and got.state_names == want.state_names
+    np.testing.assert_array_equal(got.A, want.A)
+    with pytest.raises(DesignError, match="only at the simulation step"):
+        s2.model_at(op, dt_s=0.02, method="step")
+    plain = ModelSchedule.load(make_schedule().save(tmp_path / "plain.npz"))
+    assert not plain.has_step and plain.continuous(4).step is None
+    with pytest.raises(DesignError, match="no step terms"):
+        plain.model_at(op, method="step")
