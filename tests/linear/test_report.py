@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fdi_sim.linear.report import ENGINE_LAG_KEY, format_report, worst_validation
+from fdi_sim.linear.report import ENGINE_LAG_KEY, bar_method, format_report, nonsmooth_causes, worst_validation
 from fdi_sim.linear.schedule import ModelSchedule, SchedulePoint
 from fdi_sim.operating_point import OperatingPoint
 
@@ -62,3 +62,31 @@ def test_report_without_engine_lag_has_no_such_section() -> None:
         del p.info[ENGINE_LAG_KEY]
     text = format_report(s)
     assert "N1 lag" not in text and "### zoh\n" in text
+
+
+def test_bar_is_judged_on_the_step_model_and_names_the_causes() -> None:
+    """With step validations the bar is judged on them; each point that misses it is listed with the
+    slope jumps and the engine lag JSBSim has there (and whether it passes with the identified lag)."""
+    s = _schedule()
+    for i, p in enumerate(s.ok_points):
+        p.info["validation"]["step"] = p.info["validation"]["zoh"]
+        p.info[ENGINE_LAG_KEY]["method"] = "step"
+        p.info["engine_lag"] = {"tau_up_s": 1.0, "tau_down_s": 2.4}
+        p.info["nonsmooth"] = {"aileron_cmd_norm": {"excursion": 0.004, "jump": 0.12 if i else 0.01},
+                               "alpha_rad": {"excursion": 0.002, "jump": 0.03}}
+    s.meta["validation"]["methods"] = ["zoh", "step"]
+    assert bar_method(s) == "step"
+    text = format_report(s)
+    assert "- bar (5% on every output) judged on 'step': 0/2 points pass" in text
+    assert "- validation (step with the identified N1 lag): 1/2 points" in text
+    line100 = next(ln for ln in text.splitlines() if ln.startswith("  - DHC6 h=5000 ft VC=100 kt:"))
+    assert "with the identified N1 lag it passes" in line100 and "aileron" not in line100
+    assert "throttle_cmd_norm: N1 lag 1 s up, 2.4 s down" in line100
+    line120 = next(ln for ln in text.splitlines() if ln.startswith("  - DHC6 h=5000 ft VC=120 kt:"))
+    assert "aileron_cmd_norm: slopes differ by 12% across +-0.004" in line120
+    assert "with the identified N1 lag nx_g 6.7%" in line120
+    p = s.ok_points[1]
+    assert nonsmooth_causes(p, min_jump=0.2) == ["throttle_cmd_norm: N1 lag 1 s up, 2.4 s down (FGTurboProp ExpSeek, "
+                                                 "non-smooth at the trim)"]
+    del s.ok_points[0].info["validation"]["step"], s.ok_points[1].info["validation"]["step"]
+    assert bar_method(s) == "zoh"
