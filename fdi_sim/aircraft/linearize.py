@@ -59,7 +59,6 @@ Engines
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from typing import Mapping
@@ -561,86 +560,3 @@ def pass_jacobians(ac: Aircraft, ts: TrimState, A: NDArray[np.float64], B: NDArr
     return PassJacobians(Ax=Ax, Bu=Bu, Lf=Lf, lagged_outputs=LAGGED_OUTPUTS, dt_s=float(ac.dt_s), lf_residual=res)
 
 
-
-#: probes of :func:`slope_jumps` that are states, not inputs
-STATE_PROBES: tuple[str, ...] = ("alpha_rad", "beta_rad", "p_radps", "q_radps", "r_radps")
-
-
-def slope_jumps(ac: Aircraft, ts: TrimState, probes: Mapping[str, float],
-                settings: FDSettings | None = None) -> dict[str, float]:
-    """How far JSBSim's model is from smooth within a given excursion of each input or state.
-
-    For every probe the settled derivatives (as in :func:`central_difference`) are evaluated at
-    the trim and at ``+a`` and ``-a``; the one-sided slopes ``s+ = (f(+a) - f(0)) / a`` and
-    ``s- = (f(0) - f(-a)) / a`` agree to O(a) for a smooth model and differ by the jump of the
-    slope where a table breakpoint or a kink lies within ``+-a``. The result is, over the
-    acceleration rows the probe drives substantially (``|s| a`` at least 20 % of the largest
-    change any probe makes in that row), the largest ``|s+ - s-| / |(s+ + s-) / 2|``.
-
-    Parameters
-    ----------
-    ac : Aircraft
-        At the trim ``ts`` (put back there afterwards).
-    ts : TrimState
-        The trim.
-    probes : mapping
-        Input name (:data:`CONTROL_INPUTS`, :data:`GUST_INPUTS`) or state name
-        (:data:`STATE_PROBES`) -> excursion ``a`` [units of the name]; non-positive ones are skipped.
-    settings : FDSettings, optional
-        Evaluation settings (``n_settle``, ``dt_eval_s``, ``engine``).
-
-    Returns
-    -------
-    dict
-        Probe name -> relative slope jump [-].
-
-    Raises
-    ------
-    DesignError
-        An unknown probe name.
-    """
-    s = settings or FDSettings()
-    ev = _Evaluator(ac, ts, engine_model(ac, s) == "dynamic", s, [])
-    v0 = np.concatenate([ts.x_body, ts.u_cmd, np.zeros(len(GUST_INPUTS))])
-    u, v, w = ts.x_body[:3]
-    dirs: dict[str, NDArray[np.float64]] = {}
-    for name, a in probes.items():
-        if not a > 0:
-            continue
-        e = np.zeros(v0.size)
-        if name in CONTROL_INPUTS:
-            e[len(BODY_STATES) + CONTROL_INPUTS.index(name)] = 1.0
-        elif name in GUST_INPUTS:
-            e[len(BODY_STATES) + len(CONTROL_INPUTS) + GUST_INPUTS.index(name)] = 1.0
-        elif name == "alpha_rad":
-            e[2] = (u * u + w * w) / u  # d alpha = (u dw - w du) / (u^2 + w^2) with du = 0
-        elif name == "beta_rad":
-            e[1] = math.sqrt(u * u + v * v + w * w)  # d beta = dv / Vt at small beta
-        elif name in STATE_PROBES:
-            e[BODY_STATES.index(name)] = 1.0
-        else:
-            raise DesignError(f"slope_jumps: unknown probe {name!r}; use a control, a gust or one of {STATE_PROBES}")
-        dirs[name] = e * a
-    rows = slice(0, 6)  # u, v, w, p, q, r derivatives
-    try:
-        f0 = ev.evaluate(v0).f[rows]
-        ends = {n: (ev.evaluate(v0 + d).f[rows], ev.evaluate(v0 - d).f[rows]) for n, d in dirs.items()}
-    finally:
-        for prop in GUST_PROPS:
-            ac.fdm[prop] = 0.0
-        restore_trim(ac, ts)
-    if not ends:
-        return {}
-    change = np.array([np.abs(fp - fm) / 2 for fp, fm in ends.values()])  # |s| a per probe and row
-    # rows that matter for a probe: 20 % of what any probe does there, and 10 % of the probe's own
-    # largest effect with the rows weighted as in the trim (ft/s^2; rad/s^2 x 100)
-    weighted = change * np.array([1.0, 1.0, 1.0, 100.0, 100.0, 100.0])
-    big = (change >= 0.2 * np.max(change, axis=0)) & (weighted >= 0.1 * np.max(weighted, axis=1, keepdims=True))
-    out = {}
-    for k, (name, (fp, fm)) in enumerate(ends.items()):
-        a = float(probes[name])
-        sp, sm = (fp - f0) / a, (f0 - fm) / a
-        mean = np.abs(sp + sm) / 2
-        r = np.abs(sp - sm)[big[k]] / np.maximum(mean[big[k]], 1e-300)
-        out[name] = float(np.max(r)) if r.size else 0.0
-    return out

@@ -11,6 +11,13 @@ equals the air-relative one at the (calm) trim. A gust therefore does not move t
 it enters through ``B`` (forces) and through ``D`` into the air-data outputs ``alpha_rad``,
 ``beta_rad`` and ``vc_kts``, which the sensors measure relative to the air.
 
+Each model also carries its step terms (:class:`~fdi_sim.linear.model.StepTerms`, measured pass by
+pass at the trim by :func:`fdi_sim.aircraft.linearize.pass_jacobians`): with them
+``discretize(model, method="step")`` is the discrete model of JSBSim's own 120 Hz step
+(:mod:`fdi_sim.linear.step`), on which the validation bar is judged. The continuous ``A`` is the
+settled linearization (its modes are the aircraft's, compared with FGLinearization's); the step
+model adds what the simulation does within a step (AB3, one-pass delays, engines inside the pass).
+
 Operations on the resulting :class:`LinearModel` (discretization, selection) are in
 :mod:`fdi_sim.linear.transform`, which needs no JSBSim.
 """
@@ -25,9 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 import fdi_sim
-from fdi_sim.aircraft.linearize import (
-    STATE_PROBES, BodyJacobians, FDSettings, PassJacobians, central_difference, slope_jumps,
-)
+from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, PassJacobians, central_difference
+from fdi_sim.aircraft.linearize_response import STATE_PROBES, slope_jumps
 from fdi_sim.aircraft.linearize_fglin import JsbsimLinearization, fglinearization
 from fdi_sim.aircraft.linearize_state import LAGGED_OUTPUTS, TrimState, capture_trim, has_propeller
 from fdi_sim.aircraft.model import AIRCRAFT, Aircraft

@@ -6,7 +6,8 @@ Prints, for the default grid (``aircraft/f16/grid.toml``):
 
 1. bare ``FGFDMExec.run()`` cost per step on the trimmed F-16 (the unit of every speed bar),
 2. the grid linearized by central differences only (trim + 35 evaluations per point: the centre
-   and two per state, command and gust),
+   and two per state, command and gust; ``fd`` also holds the pass-by-pass Jacobians of the step
+   model, about 60 run_ic and 100 tiny passes per point),
 3. the same with the FGLinearization cross-check (what ``fdi-sim linearize f16`` does by default),
 4. with ``--validate`` also the 8 x 10 s doublet runs per point.
 

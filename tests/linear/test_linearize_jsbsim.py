@@ -10,9 +10,9 @@ import pytest
 from scipy.signal import cont2discrete
 
 from fdi_sim.aircraft import Aircraft, trim
-from fdi_sim.aircraft.linearize import FDSettings, central_difference, slope_jumps
+from fdi_sim.aircraft.linearize import FDSettings, central_difference
 from fdi_sim.aircraft.linearize_fglin import fglinearization
-from fdi_sim.aircraft.linearize_response import identify_engine_lag
+from fdi_sim.aircraft.linearize_response import identify_engine_lag, slope_jumps
 from fdi_sim.aircraft.linearize_state import capture_trim
 from fdi_sim.errors import DesignError
 from fdi_sim.isa import vc_from_vt
