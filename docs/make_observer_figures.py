@@ -1,10 +1,13 @@
 """Figures for docs/observers.md: ``.venv/bin/python docs/make_observer_figures.py`` writes docs/figures/observer_*.png.
 
+``--sidar`` makes only Sidar's figures 6-9 and prints the readings tables of the Sidar section.
+
 Everything is computed by fdi_sim.detectors (Beard-Jones, LMI, Kalman, Sidar); this script only plots.
 The Twin Otter is the INTERIM hand-built model ``twin_otter_longitudinal_interim()``.
 """
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -17,10 +20,11 @@ import scipy.linalg as sla  # noqa: E402
 from scipy.signal import place_poles  # noqa: E402
 from scipy.stats import binomtest  # noqa: E402
 
-from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_gains, run_sidar_example  # noqa: E402
+from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_gains  # noqa: E402
 from fdi_sim.detectors.beard_jones import angle_rad, beard_jones_gain  # noqa: E402
 from fdi_sim.detectors.kalman import KalmanInnovationDetector, MultipleModelBank, simulate_discrete, steady_state_kalman  # noqa: E402
 from fdi_sim.detectors.lmi_filter import design_lmi_filter, sensitivity_max_sv  # noqa: E402
+from fdi_sim.detectors.sidar_examples import SidarReading, sidar_bars, simulate_sidar  # noqa: E402
 from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim  # noqa: E402
 
 OUT = Path(__file__).parent / "figures"
@@ -91,26 +95,126 @@ def fig_lmi() -> dict[str, object]:
     return res
 
 
+# --------------------------------------------------------------------------- Sidar (sec. VI): figures 6-9 and the readings study
+
+SIDAR_GRID_1 = np.geomspace(1.0, 1e4, 17)  # m, n grid of example 1 [1/s] (continuous-equivalent: per step = x 0.05 s)
+SIDAR_GRID_2 = np.geomspace(0.1, 3e3, 23)  # common gain of example 2 [1/s]
+# example 1: (row label, reading); example 2 likewise; "printed" = the literal text
+SIDAR_READINGS_1 = [
+    ("eq. 22 continuous, x_hat, K for theta_hat(0), printed x(0), x_hat(0) [literal]", SidarReading()),
+    ("regressor x (true state)", SidarReading(regressor="x")),
+    ("K for the true theta(0)", SidarReading(gain_design="true")),
+    ("every entry of A0, B0 adapts (M, N all m, n)", SidarReading(full_matrices=True)),
+    ("normalized law (/ 1 + |x_hat|^2 + |u|^2)", SidarReading(normalized=True)),
+    ("eq. 23 every 0.05 s, plant + observer continuous in between", SidarReading(law="sampled")),
+    ("eq. 23, plant and observer forward Euler at 0.05 s", SidarReading(law="euler")),
+    ("eq. 23, observer Euler on samples, plant exact (biased)", SidarReading(law="euler_observer")),
+    ("x_hat2(0) = 0 instead of 1", SidarReading(x_hat0=(0.8, 0.0))),
+    ("x_hat(0) = x(0)", SidarReading(x_hat0=(1.0, 0.0))),
+]
+SIDAR_READINGS_2 = [
+    ("eq. 22 continuous, M = g C+, b from eps2, printed x_hat(0) [literal]", SidarReading()),
+    ("b from eps1", SidarReading(b_from="y1")),
+    ("b from eps1 + eps2", SidarReading(b_from="y1+y2")),
+    ("M, N all ones (every output drives every parameter)", SidarReading(outputs="all")),
+    ("eq. 23 every 0.05 s, plant + observer continuous in between", SidarReading(law="sampled")),
+    ("eq. 23, plant and observer forward Euler at 0.05 s", SidarReading(law="euler")),
+    ("eq. 23, observer Euler on samples, plant exact (biased)", SidarReading(law="euler_observer")),
+    ("x_hat(0) = x(0)", SidarReading(x_hat0=(1.0, 0.0, 0.0))),
+]
+SIDAR_FIG9_ONLY = [
+    ("fig. 9 starts matched (theta_hat(0) = theta(0), x_hat(0) = x(0))", SidarReading(start_matched=True)),
+    ("... and c held at its true value", SidarReading(start_matched=True, adapt_c=False)),
+    ("... sampled law, per-step gains", SidarReading(start_matched=True, law="sampled")),
+]
+
+
+def _sidar_scale(reading: SidarReading) -> float:
+    """Continuous-equivalent gain [1/s] -> the reading's gain (per step for the discrete laws)."""
+    return 1.0 if reading.law == "continuous" else reading.step_s
+
+
+def _bars_text(bars, j: int) -> str:
+    return " / ".join(f"{b.measured[j]:.3g}" if np.isfinite(b.measured[j]) else "div." for b in bars) + (
+        " **met**" if all(b.met[j] for b in bars) else "")
+
+
+def sidar_readings() -> dict[str, list[str]]:
+    """The readings tables of docs/observers.md (markdown rows); every number from simulate_sidar."""
+    out: dict[str, list[str]] = {"ex1": [], "ex2": [], "ex2_pp": []}
+    stated1 = np.array([[10.0, 5.0], [200.0, 100.0]])  # stated m, n as [1/s], and as per 0.05-s step
+    grid1 = np.array([(m, n) for m in SIDAR_GRID_1 for n in SIDAR_GRID_1])
+    for label, rd in SIDAR_READINGS_1:
+        g = np.vstack([stated1, grid1]) * _sidar_scale(rd)
+        b6 = sidar_bars(simulate_sidar(1, g, False, rd, 12.0))
+        b7 = sidar_bars(simulate_sidar(1, g, True, rd, 20.0))
+        ok6, ok7 = np.logical_and.reduce([b.met for b in b6]), np.logical_and.reduce([b.met for b in b7])
+        out["ex1"].append(f"| {label} | {_bars_text(b6, 0)} | {_bars_text(b6, 1)} | {_bars_text(b7, 0)} | {_bars_text(b7, 1)} "
+                          f"| {ok6[2:].sum()} / {ok7[2:].sum()} / {(ok6 & ok7)[2:].sum()} |")
+    stated2 = np.array([[1.0] * 3, [20.0] * 3])  # unity as [1/s], and per 0.05-s step
+    grid2 = np.repeat(SIDAR_GRID_2[:, None], 3, axis=1)
+    for label, rd in SIDAR_READINGS_2 + SIDAR_FIG9_ONLY:
+        g = np.vstack([stated2, grid2]) * _sidar_scale(rd)
+        b9 = sidar_bars(simulate_sidar(2, g, True, rd, 16.0))
+        ok9 = np.logical_and.reduce([b.met for b in b9])
+        if rd.start_matched:
+            out["ex2"].append(f"| {label} | - | - | {_bars_text(b9, 0)} | {_bars_text(b9, 1)} | - / {ok9[2:].sum()} / - |")
+            continue
+        b8 = sidar_bars(simulate_sidar(2, g, False, rd, 12.0))
+        ok8 = np.logical_and.reduce([b.met for b in b8])
+        out["ex2"].append(f"| {label} | {_bars_text(b8, 0)} | {_bars_text(b8, 1)} | {_bars_text(b9, 0)} | {_bars_text(b9, 1)} "
+                          f"| {ok8[2:].sum()} / {ok9[2:].sum()} / {(ok8 & ok9)[2:].sum()} |")
+    # example 2 with a gain per parameter (a, b, c): which gains can meet fig. 8 at all
+    gv = np.geomspace(1.0, 3e3, 10)
+    g3 = np.array([(ga, gb, gc) for ga in gv for gb in gv for gc in gv])
+    for label, rd in (("literal (continuous)", SidarReading()), ("sampled (eq. 23 every 0.05 s)", SidarReading(law="sampled"))):
+        b8 = sidar_bars(simulate_sidar(2, g3 * _sidar_scale(rd), False, rd, 12.0))
+        ok8 = np.logical_and.reduce([b.met for b in b8])
+        gm = g3[ok8] if ok8.any() else np.full((1, 3), np.nan)  # continuous-equivalent [1/s]
+        k = int(np.argmin(gm.max(axis=1)))  # the met row with the smallest largest gain
+        out["ex2_pp"].append(f"| {label} | {ok8.sum()} of {len(g3)} | {gm.max(axis=1)[k]:.3g} | ({gm[k, 0]:.3g}, {gm[k, 1]:.3g}, "
+                             f"{gm[k, 2]:.3g}): {_bars_text(b8, int(np.flatnonzero(ok8)[k]) if ok8.any() else 0)} |")
+    return out
+
+
 def fig_sidar() -> None:
-    cases = [
-        ("observer_sidar_fig6.png", 1, False), ("observer_sidar_fig7.png", 1, True),
-        ("observer_sidar_fig8.png", 2, False), ("observer_sidar_fig9.png", 2, True),
+    """docs/figures/observer_sidar_fig6..9.png: the literal reading with the stated and the per-step gains,
+    and the nearest reading that meets the figure's statements (named in the legend)."""
+    cases = [  # file, example, tracking, [(label, gains [1/s], reading, line style)]
+        ("observer_sidar_fig6.png", 1, False, [("literal, m=10, n=5 /s", (10, 5), SidarReading(), ":"),
+                                               ("literal, per step: 200, 100 /s", (200, 100), SidarReading(), "-"),
+                                               ("x_hat2(0)=0, 200, 100 /s", (200, 100), SidarReading(x_hat0=(0.8, 0.0)), "--")]),
+        ("observer_sidar_fig7.png", 1, True, [("literal, m=10, n=5 /s", (10, 5), SidarReading(), ":"),
+                                              ("literal, per step: 200, 100 /s", (200, 100), SidarReading(), "-"),
+                                              ("x_hat2(0)=0, 200, 100 /s", (200, 100), SidarReading(x_hat0=(0.8, 0.0)), "--")]),
+        ("observer_sidar_fig8.png", 2, False, [("literal, unity /s", (1, 1, 1), SidarReading(), ":"),
+                                               ("literal, per step: 20 /s", (20, 20, 20), SidarReading(), "-"),
+                                               ("tuned: a 35, b 35, c 1232 /s", (35.11, 35.11, 1232.5), SidarReading(), "--")]),
+        ("observer_sidar_fig9.png", 2, True, [("literal, unity /s", (1, 1, 1), SidarReading(), ":"),
+                                              ("literal, per step: 20 /s", (20, 20, 20), SidarReading(), "-"),
+                                              ("starts matched, 400 /s", (400, 400, 400), SidarReading(start_matched=True), "--")]),
     ]
-    for fname, ex, tracking in cases:
-        per_step = (10 / 0.05, 5 / 0.05) if ex == 1 else (1 / 0.05, 1 / 0.05)
-        runs = [("stated gains (continuous)", run_sidar_example(ex, tracking, t_end_s=20.0)),
-                ("per-step gains / 0.05 s", run_sidar_example(ex, tracking, *per_step, t_end_s=20.0))]
-        fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
-        for (label, r), ls in zip(runs, ("-", "--")):
-            ax[0].semilogy(r.t_s, np.maximum(r.output_error_norm, 1e-6), ls, label=label)
-            for j, nm in enumerate(r.names):
-                ax[1].plot(r.t_s, r.params_hat[:, j], ls, label=f"{nm}0 ({label})" if ls == "-" else None)
-        for j, nm in enumerate(runs[0][1].names):
-            ax[1].plot(runs[0][1].t_s, runs[0][1].params_true[:, j], "k:", lw=1)
-        ax[0].axhline(4e-3 if ex == 1 else 5e-2, color="k", ls=":", lw=1)
-        ax[0].set(xlabel="t [s]", ylabel="|y - yh|", title=f"Sidar example {ex}{' tracking' if tracking else ''}: output error")
-        ax[1].set(xlabel="t [s]", ylabel="parameter", title="estimates (dotted: truth)")
-        _save(fig, fname, {ax[0]: 8, ax[1]: 7})
+    for fname, ex, tracking, runs in cases:
+        q = ex + 1
+        fig, ax = plt.subplots(1, q + 1, figsize=(3.6 * (q + 1), 3.6))
+        for i, (label, gains, rd, ls) in enumerate(runs):
+            r = simulate_sidar(ex, np.array(gains, float), tracking, rd, 20.0 if tracking else 12.0)
+            met = "all met" if all(b.met[0] for b in sidar_bars(r)) else "not met"
+            ax[0].semilogy(r.t_s, np.maximum(r.output_error_norm[0], 1e-7), ls, color=f"C{i}", lw=1, label=f"{label} ({met})")
+            for j in range(q):
+                ax[j + 1].plot(r.t_s, r.params_hat[0, :, j], ls, color=f"C{i}", lw=1)
+        for j, nm in enumerate(r.names):
+            ax[j + 1].plot(r.t_s, r.params_true[:, j], "k", lw=0.8)
+            lo, hi = r.params_true[:, j].min(), r.params_true[:, j].max()
+            ax[j + 1].set(xlabel="t [s]", title=f"{nm}_0 (black: plant {nm})", ylim=(lo - 1.2, hi + 1.0))
+        for b in sidar_bars(r):  # the output-error statements: a level over a time window
+            if "|eps|" in b.text:
+                t0, t1 = (float(b.text.split("t >= ")[1].split(" ")[0]), r.t_s[-1]) if "t >= " in b.text else (
+                    float(b.text.split("(")[1].split("-")[0]), 12.0)
+                ax[0].hlines(b.limit, t0, t1, colors="k", linestyles=":", lw=1)
+        ax[0].set(xlabel="t [s]", ylabel="|y - y_hat|", ylim=(1e-6, 3), title=f"Sidar fig. {fname[-5]}: output error")
+        fig.text(0.01, 0.01, "dotted black: the paper's output-error bounds; parameter bounds: docs/observers.md", fontsize=7)
+        _save(fig, fname, {ax[0]: 6})
 
 
 def fig_far() -> dict[str, tuple[int, int]]:
@@ -187,6 +291,11 @@ def fig_mmae() -> None:
 
 if __name__ == "__main__":
     OUT.mkdir(parents=True, exist_ok=True)
+    if "--sidar" in sys.argv:  # only Sidar's figures and the readings tables (about 10 min)
+        fig_sidar()
+        for key, rows in sidar_readings().items():
+            print(f"\n[{key}]\n" + "\n".join(rows))
+        raise SystemExit(0)
     fig_beard_jones()
     lmi = fig_lmi()
     for k, (d, s) in lmi.items():
