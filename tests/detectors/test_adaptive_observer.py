@@ -164,6 +164,7 @@ def test_fig_6_example_1(gains) -> None:
     assert _met(_run(1, gains))
 
 
+@pytest.mark.slow  # gain grids, 5-15 s each
 def test_fig_6_and_fig_7_exclude_each_other_through_the_initial_observer_state() -> None:
     """Per-step gains: with the printed x_hat(0) = (0.8, 1) fig. 7 holds and fig. 6 fails; with x_hat2(0) = 0
     fig. 6 holds (|eps| 2.6e-3, 3.8 %) and fig. 7 fails (5.4e-3 at 13 s, 15 %)."""
@@ -197,6 +198,7 @@ def test_fig_9_example_2_tracking(gains) -> None:
     assert _met(_run(2, gains, tracking=True))
 
 
+@pytest.mark.slow  # gain grids, 5-15 s each
 def test_fig_9_met_from_a_matched_start_with_twenty_times_the_per_step_gains() -> None:
     """The one reading that meets fig. 9: the run starts at the true parameters and state (the ramps begin at
     1 s) and the gain is 400 /s (20 per step), 20 times the per-step reading of "unity"."""
@@ -212,6 +214,7 @@ def _grid_ok(reading: SidarReading, tracking: bool) -> np.ndarray:
     return np.logical_and.reduce([b.met for b in bars])
 
 
+@pytest.mark.slow  # gain grids, 5-15 s each
 def test_no_gains_meet_fig_6_and_fig_7_together_with_the_printed_initial_state() -> None:
     """17 x 17 grid of m, n in 1..1e4 /s (literal reading): fig. 7 holds on a patch around the per-step gains,
     fig. 6 nowhere, so never both."""
@@ -219,6 +222,7 @@ def test_no_gains_meet_fig_6_and_fig_7_together_with_the_printed_initial_state()
     assert ok7.sum() >= 5 and not _grid_ok(SidarReading(), False).any()
 
 
+@pytest.mark.slow  # gain grids, 5-15 s each
 def test_fig_6_and_fig_7_together_need_a_matched_initial_state_and_larger_gains() -> None:
     """With x_hat(0) = x(0) both figures hold on the grid, but only for m >= 316 /s (per-step reading: 200)."""
     rd = SidarReading(x_hat0=(1.0, 0.0))
@@ -226,6 +230,7 @@ def test_fig_6_and_fig_7_together_need_a_matched_initial_state_and_larger_gains(
     assert both.any() and SIDAR_GRID_1[both, 0].min() > 250.0
 
 
+@pytest.mark.slow  # gain grids, 5-15 s each
 def test_fig_8_needs_gains_of_a_thousand_per_second() -> None:
     """No common gain in 0.1..3000 /s meets fig. 8; over a 10^3 grid of (a, b, c) gains in 1..3000 /s every
     combination that does has a gain >= 1232 /s (the grid point above 500)."""
