@@ -4,15 +4,28 @@ Control laws (deviations about the trim commands; angles in rad, rates in rad/s,
 unit weight in ft, energy rates in ft/s; positive elevator is nose down on both aircraft):
 
 * speed estimate. The hold is judged against the steady air mass, so the autopilot must not
-  chase the longitudinal gust that the air data sees. A second-order complementary filter
-  blends the measured airspeed (low frequencies) with the inertial acceleration along the
-  flight path (high frequencies) and estimates the acceleration bias, so that no steady speed
-  error is left: a_m is the specific force rotated by roll and pitch into the level,
-  heading-aligned frame, plus gravity, projected on (heading, gamma = asin(hdot / V_0)):
+  chase the gusts that the air data sees; MIL-F-8785C turbulence has so much low-frequency
+  content (a 60 s mean of the longitudinal gust reaches 10 ft/s in moderate turbulence) that
+  no filter on air data and accelerometers alone separates it from a speed change. The GNSS
+  velocity (drift-free, gust-free) does: the wind is the ground velocity minus the air velocity,
+  w_m = v_gnd - R_nb(phi, theta, psi) V_t [cos a cos b, sin b, sin a cos b] (horizontal only,
+  V_t = r(h, vc) vc, r the ISA TAS/CAS ratio linearized about the trim point); its estimate
+  starts at engagement (the first sample) and follows slowly, w_hat' = (w_m - w_hat) / tau_wind,
+  so that gusts shorter than tau_wind hardly enter it. The airspeed relative to that air mass is
+  v_s = |v_gnd - w_hat| (true airspeed scale). A second-order complementary filter blends v_s
+  (low frequencies) with the inertial acceleration along the flight path (high frequencies) and
+  estimates the acceleration bias: a_m is the specific force rotated by roll and pitch into the
+  level, heading-aligned frame, plus gravity, projected on (heading, gamma = asin(hdot / V_0)):
   a_m = g [(cos th n_x + sin th n_zl) cos gamma - (cos th n_zl - sin th n_x + 1) sin gamma],
-  n_zl = cos phi n_z + sin phi n_y. With v_m = r vc (r = TAS/CAS at the trim point, ISA):
-  dv_hat/dt = a_m - b + 2 zeta (v_m - v_hat) / tau_v,  db/dt = -(v_m - v_hat) / tau_v^2.
-  a = a_m - b, low-passed with tau_acc, is the acceleration fed back below.
+  n_zl = cos phi n_z + sin phi n_y;
+  dv_hat/dt = a_m - b + 2 zeta (v_s - v_hat) / tau_v,  db/dt = -(v_s - v_hat) / tau_v^2.
+  a = a_m - b, low-passed with tau_acc, is the acceleration fed back below; the speed error is
+  e_v = r(h, vc_ref) vc_ref - v_hat.
+  Consequences: the hold is as good as the wind estimate at engagement (in the simulation the
+  turbulence starts from rest at t = 0, so the first sample sees the steady air plus sensor
+  errors); a real change of the wind, and an airspeed-sensor fault, reach the speed hold only
+  through the wind estimate, with the time constant tau_wind (the protections below act on the
+  measured airspeed directly). Without GNSS velocity the autopilot does not start.
 * longitudinal, total energy control (TECS, Lambregts 1983) when both holds are engaged:
   hdot_c = sat(k_h e_h + hdot_ff, hdot_min, hdot_max),  vdot_c = sat(k_v e_v, vdot_max),
   pe = hdot_c - hdot,  ke = (V_0 / g) (vdot_c - a)  (potential and kinetic energy-rate errors),
@@ -30,9 +43,12 @@ unit weight in ft, energy rates in ft/s; positive elevator is nose down on both 
   authority fades when the measured airspeed (low-passed with tau_vlim) is more than v_lim
   above the reference, the nose-up authority when it is more than v_lim below, or when the
   angle-of-attack vane (low-passed) comes within alpha_band of alpha_max.
-* lateral:   phi_cmd = sat(k_psi wrap(psi_ref - psi)) in heading mode or phi_ref in a turn,
+* lateral:   phi_cmd = LP(sat(k_psi wrap(psi_ref - psi))) in heading mode, low-passed with tau_phi
+  (yaw gusts swing the heading by several degrees within a second; the bank command should not
+  follow them), or the turn's bank in a turn (the filter state too, so the roll-out is smooth),
   aileron = a_0 + k_phi (phi_cmd - phi) - k_p p + k_phii int(phi_cmd - phi) - k_absbeta |beta|
-  (the last term cancels a rolling moment even in sideslip, see the DHC-6 gains);
+  (the last term cancels a rolling moment even in sideslip, see the DHC-6 gains; the integral
+  stops while the command sits at a stop and the error pushes it further);
 * yaw:       rudder = r_0 + k_r r_wo - k_beta beta, r_wo the yaw rate through a washout tau_wo.
 
 Gains per aircraft live in ``aircraft/<name>/autopilot.toml`` with the reasoning. The step is
@@ -41,6 +57,7 @@ pure-Python scalar arithmetic (the measurement vector is converted to a list onc
 from __future__ import annotations
 
 import math
+import operator
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -57,7 +74,7 @@ AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
 BLOCK_STEPS = 120  # maneuver tables are evaluated one block of steps at a time
 #: measurements the autopilot flies on
 NEEDED = ("h_ft", "hdot_fps", "vc_kts", "theta_rad", "q_radps", "phi_rad", "p_radps", "psi_rad", "r_radps", "nx_g", "ny_g",
-          "nz_g", "alpha_rad")
+          "nz_g", "alpha_rad", "beta_rad", "v_north_fps", "v_east_fps", "v_down_fps")
 
 @dataclass(frozen=True)
 class AutopilotGains:
@@ -89,6 +106,7 @@ class AutopilotGains:
     k_theta : pitch error to elevator [1/rad]
     k_q : pitch rate to elevator [s/rad]
     k_psi : heading error to bank command [-]
+    tau_phi_s : low-pass time constant of the bank command in heading mode [s]
     phi_max_rad : bank command limit [rad]
     k_phi : bank error to aileron [1/rad]
     k_p : roll rate to aileron [s/rad]
@@ -97,6 +115,7 @@ class AutopilotGains:
     k_r : washed-out yaw rate to rudder [s/rad]
     k_beta : sideslip to rudder (directional stiffness) [1/rad]
     tau_wo_s : yaw-damper washout time constant [s]
+    tau_wind_s : time constant of the wind estimate (GNSS ground velocity minus air velocity) [s]
     tau_v_s : natural period / (2 pi) of the airspeed complementary filter, 1/omega [s]
     zeta_v : damping ratio of the airspeed complementary filter [-]
     tau_acc_s : low-pass time constant of the acceleration used in the energy-rate feedback [s]
@@ -126,6 +145,7 @@ class AutopilotGains:
     k_theta: float
     k_q: float
     k_psi: float
+    tau_phi_s: float
     phi_max_rad: float
     k_phi: float
     k_p: float
@@ -134,6 +154,7 @@ class AutopilotGains:
     k_r: float
     k_beta: float
     tau_wo_s: float
+    tau_wind_s: float
     tau_v_s: float
     zeta_v: float
     tau_acc_s: float
@@ -215,12 +236,13 @@ class Pilot:
 
     def __init__(self, gains: AutopilotGains, modes: AutopilotModes, trim: TrimPoint, maneuvers: Sequence[object],
                  measurement_names: Sequence[str], dt_s: float) -> None:
-        needed = NEEDED + (("beta_rad",) if (gains.k_absbeta or gains.k_beta) else ())
+        needed = NEEDED
         missing = [n for n in needed if n not in measurement_names]
         if missing and (modes.altitude or modes.airspeed or modes.lateral):
             raise ValueError(f"the autopilot needs the measurements {missing}")
         self.g, self.modes, self.trim, self.dt_s = gains, modes, trim, dt_s
-        self.idx = {n: measurement_names.index(n) for n in needed if n in measurement_names}
+        # one C-level gather of the measurements in NEEDED order per step (None: no hold engaged, some missing)
+        self._gather = None if missing else operator.itemgetter(*(list(measurement_names).index(n) for n in needed))
         self.sticks = [m for m in maneuvers if isinstance(m, PulseTrain)]
         self.ramps = sorted((m for m in maneuvers if isinstance(m, RefRamp)), key=lambda m: m.t_start_s)
         self._headings = tuple(sorted((m for m in maneuvers if isinstance(m, HeadingChange)), key=lambda m: m.t_start_s))
@@ -233,9 +255,16 @@ class Pilot:
                 if q.channel == r.channel:
                     start = q.value_at(r.t_start_s, s, start)
             self._ramp_start.append(start)
-        # energy scaling from the trim point: true airspeed V_0 [ft/s], TAS per kt of CAS [ft/s/kt]
+        # energy scaling from the trim point: true airspeed V_0 [ft/s]; TAS per kt of CAS [ft/s/kt]
+        # linearized about the trim, r(h, vc) = r_0 + r_h (h - h_0) + r_v (vc - vc_0) (ISA, central
+        # differences over +-500 ft and +-5 kt: within 0.25 % over +-3000 ft and +-30 kt)
         self._v0_fps = vt_from_vc(trim.h_ft, trim.vc_kts)[0] * FPS_PER_KT
         self._fps_per_kcas = self._v0_fps / trim.vc_kts
+        dh, dv = 500.0, 5.0
+        r = [[vt_from_vc(trim.h_ft + i * dh, trim.vc_kts + j * dv)[0] * FPS_PER_KT / (trim.vc_kts + j * dv)
+              for j in (-1, 1)] for i in (-1, 1)]
+        self._r_h = (r[1][0] + r[1][1] - r[0][0] - r[0][1]) / (4.0 * dh)
+        self._r_v = (r[0][1] + r[1][1] - r[0][0] - r[1][0]) / (4.0 * dv)
         self._ke_s = self._v0_fps / G0_FPS2  # V_0 / g: kinetic energy height per ft/s of speed [s]
         self.reset()
 
@@ -244,17 +273,30 @@ class Pilot:
         self._int_e = self._int_b = self._int_phi = 0.0
         self._r_wo_state = 0.0
         self._v_hat = self._fps_per_kcas * self.trim.vc_kts
+        self._wind_n_fps = self._wind_e_fps = 0.0
+        self._r_ref = self._fps_per_kcas  # TAS/CAS ratio at the reference speed and measured height
         self._acc_bias = 0.0
         self._acc_lp = 0.0
         self._sat = 0.0
         self._vc_lp = self.trim.vc_kts
         self._alpha_lp = 0.0
-        self._first = True  # the angle-of-attack filter starts from the first measurement
+        self._first = True  # the angle-of-attack filter and the wind estimate start from the first measurement
         self._psi_hold = self.trim.psi_rad
         self._in_turn = False
+        self._phi_cmd = 0.0  # low-passed bank command [rad]
         self.headings = list(self._headings)  # heading changes still ahead (a turn exit drops past ones)
         self._block_start = -(10**9)
         self._rows: list[list[float]] = []
+
+    @property
+    def airspeed_estimate_kts(self) -> float:
+        """The speed estimate relative to the estimated steady air mass, as calibrated airspeed [kt]."""
+        return self._v_hat / self._r_ref
+
+    @property
+    def wind_estimate_fps(self) -> tuple[float, float]:
+        """The estimated steady wind (north, east), the direction it blows to [ft/s]."""
+        return self._wind_n_fps, self._wind_e_fps
 
     def _fill_block(self, k0: int) -> None:
         """Rows for steps k0 .. k0+BLOCK_STEPS-1: [de, da, dr, dt, h_ref, hdot_ff, vc_ref, turn_phi(or nan)]."""
@@ -293,53 +335,74 @@ class Pilot:
         if not (self._block_start <= k < self._block_start + BLOCK_STEPS):
             self._fill_block(k)
         de, da, dr, dthr, h_ref, hdot_ff, vc_ref, turn_phi = self._rows[k - self._block_start]
-        g, tr, dt, ix, modes = self.g, self.trim, self.dt_s, self.idx, self.modes
-        ym = y.tolist()
+        g, tr, dt, modes = self.g, self.trim, self.dt_s, self.modes
+        if modes.lateral or modes.altitude or modes.airspeed:
+            (h_m, hdot_m, vc_m, theta, q, phi, p, psi_m, r, nx, ny, nz, alpha_m, beta_m, vn, ve,
+             vd) = self._gather(y.tolist())  # NEEDED order
         elev, ail, rud, thr = tr.elevator_cmd_norm, tr.aileron_cmd_norm, tr.rudder_cmd_norm, tr.throttle_cmd_norm
         phi_ref = 0.0
         psi_ref = self._psi_ref(t_s)
         if modes.lateral:
-            phi, p, r = ym[ix["phi_rad"]], ym[ix["p_radps"]], ym[ix["r_radps"]]
             if turn_phi == turn_phi:  # not NaN: in a turn
                 self._in_turn = True
-                phi_cmd = phi_ref = turn_phi
+                phi_cmd = phi_ref = self._phi_cmd = turn_phi
             else:
                 if self._in_turn:  # leaving a turn: hold the heading reached
                     self._in_turn = False
-                    self._psi_hold = ym[ix["psi_rad"]]
+                    self._psi_hold = psi_m
                     self.headings = [h for h in self.headings if h.t_start_s > t_s]
                     psi_ref = self._psi_hold
-                e_psi = _wrap(psi_ref - ym[ix["psi_rad"]])
-                phi_cmd = phi_ref = max(-g.phi_max_rad, min(g.phi_max_rad, g.k_psi * e_psi))
+                e_psi = _wrap(psi_ref - psi_m)
+                phi_raw = max(-g.phi_max_rad, min(g.phi_max_rad, g.k_psi * e_psi))
+                self._phi_cmd += dt * (phi_raw - self._phi_cmd) / g.tau_phi_s
+                phi_cmd = phi_ref = self._phi_cmd
             e_phi = phi_cmd - phi
-            self._int_phi += e_phi * dt
-            ail += g.k_phi * e_phi - g.k_p * p + g.k_phii * self._int_phi
+            ail += g.k_phi * e_phi - g.k_p * p + g.k_phii * (self._int_phi + e_phi * dt)
             if g.k_absbeta:
-                ail -= g.k_absbeta * abs(ym[ix["beta_rad"]])
+                ail -= g.k_absbeta * abs(beta_m)
+            # anti-windup: the bank integral grows only while the aileron command is inside its
+            # stops or the error would bring it back (a jammed or floating aileron must not wind it up)
+            ail_u = ail + da
+            if -1.0 < ail_u < 1.0 or (ail_u >= 1.0) == (e_phi < 0.0):
+                self._int_phi += e_phi * dt
             # washout r_wo = tau s / (1 + tau s) r = r - x, with the low-pass x' = (r - x) / tau (Euler)
             r_wo = r - self._r_wo_state
             self._r_wo_state += dt * r_wo / g.tau_wo_s
             rud += g.k_r * r_wo
             if g.k_beta:
-                rud -= g.k_beta * ym[ix["beta_rad"]]
+                rud -= g.k_beta * beta_m
         if modes.altitude or modes.airspeed:
-            theta = ym[ix["theta_rad"]]
             # acceleration along the flight path [ft/s^2] (module docstring), gamma from the baro climb rate
             sth, cth = math.sin(theta), math.cos(theta)
-            phi_m, nx = ym[ix["phi_rad"]], ym[ix["nx_g"]]
-            nzl = math.cos(phi_m) * ym[ix["nz_g"]] + math.sin(phi_m) * ym[ix["ny_g"]]
-            sg = max(-0.5, min(0.5, ym[ix["hdot_fps"]] / self._v0_fps))  # clipped: a faulty hdot cannot break it
+            cphi_m, sphi_m = math.cos(phi), math.sin(phi)
+            nzl = cphi_m * nz + sphi_m * ny
+            sg = max(-0.5, min(0.5, hdot_m / self._v0_fps))  # clipped: a faulty hdot cannot break it
             acc = G0_FPS2 * ((cth * nx + sth * nzl) * math.sqrt(1.0 - sg * sg) - (cth * nzl - sth * nx + 1.0) * sg)
             acc -= self._acc_bias
-            # second-order complementary filter: speed [ft/s TAS scale] and acceleration bias [ft/s^2]
-            vc_m = ym[ix["vc_kts"]]
-            e_f = self._fps_per_kcas * vc_m - self._v_hat
+            # wind [ft/s, NED]: GNSS ground velocity minus the air velocity rotated body -> NED
+            vt_m = vc_m * (self._fps_per_kcas + self._r_h * (h_m - tr.h_ft) + self._r_v * (vc_m - tr.vc_kts))
+            cb = math.cos(beta_m)
+            u_a, v_a, w_a = vt_m * math.cos(alpha_m) * cb, vt_m * math.sin(beta_m), vt_m * math.sin(alpha_m) * cb
+            x_h = u_a * cth + (v_a * sphi_m + w_a * cphi_m) * sth  # along the heading, level
+            y_h = v_a * cphi_m - w_a * sphi_m                       # to the right of it, level
+            cpsi, spsi = math.cos(psi_m), math.sin(psi_m)
+            wn_m, we_m = vn - (x_h * cpsi - y_h * spsi), ve - (x_h * spsi + y_h * cpsi)
+            if self._first:  # engagement: the wind estimate starts at the first sample
+                self._wind_n_fps, self._wind_e_fps = wn_m, we_m
+            self._wind_n_fps += dt * (wn_m - self._wind_n_fps) / g.tau_wind_s
+            self._wind_e_fps += dt * (we_m - self._wind_e_fps) / g.tau_wind_s
+            # airspeed relative to the estimated air mass [ft/s TAS]: v_s = |v_gnd - w_hat|
+            dn, de_ = vn - self._wind_n_fps, ve - self._wind_e_fps
+            v_s = math.sqrt(dn * dn + de_ * de_ + vd * vd)
+            if self._first:
+                self._v_hat = v_s
+            # second-order complementary filter: speed [ft/s TAS] and acceleration bias [ft/s^2]
+            e_f = v_s - self._v_hat
             self._v_hat += dt * (acc + 2.0 * g.zeta_v * e_f / g.tau_v_s)
             self._acc_bias -= dt * e_f / (g.tau_v_s * g.tau_v_s)
             self._acc_lp += dt * (acc - self._acc_lp) / g.tau_acc_s
             acc = self._acc_lp
             # protections' inputs: low-passed measured airspeed [kt] and angle of attack [rad]
-            alpha_m = ym[ix["alpha_rad"]]
             if self._first:
                 self._first, self._alpha_lp = False, alpha_m
             self._vc_lp += dt * (vc_m - self._vc_lp) / g.tau_vlim_s
@@ -347,11 +410,12 @@ class Pilot:
             # energy-rate errors [ft/s]: potential (climb rate) and kinetic ((V_0/g) acceleration)
             pe = ke = 0.0
             if modes.altitude:
-                hdot_c = g.k_h_per_s * (h_ref - ym[ix["h_ft"]]) + hdot_ff
+                hdot_c = g.k_h_per_s * (h_ref - h_m) + hdot_ff
                 hdot_c = max(g.hdot_min_fps, min(g.hdot_max_fps, hdot_c))
-                pe = hdot_c - ym[ix["hdot_fps"]]
+                pe = hdot_c - hdot_m
             if modes.airspeed:
-                e_v = self._fps_per_kcas * vc_ref - self._v_hat
+                self._r_ref = self._fps_per_kcas + self._r_h * (h_m - tr.h_ft) + self._r_v * (vc_ref - tr.vc_kts)
+                e_v = self._r_ref * vc_ref - self._v_hat
                 vdot_c = max(-g.vdot_max_fps2, min(g.vdot_max_fps2, g.k_v_per_s * e_v))
                 ke = self._ke_s * (vdot_c - acc)
                 e_rate = pe + ke  # total energy rate error -> throttle
@@ -376,7 +440,7 @@ class Pilot:
             if modes.altitude:
                 w_v = g.w_speed + self._sat * (g.w_speed_sat - g.w_speed)
                 b_rate = (2.0 - w_v) * pe - w_v * ke if modes.airspeed else pe  # energy balance rate error
-                cphi = max(math.cos(ym[ix["phi_rad"]]), 0.5)
+                cphi = max(cphi_m, 0.5)
                 dtheta = (g.k_eb_p_rad_per_fps * b_rate + g.k_eb_i_rad_per_ft * (self._int_b + b_rate * dt)
                           + g.k_turn_rad * (1.0 / cphi - 1.0))
                 # pitch limits about trim; the side that would make an over/underspeed worse fades out
@@ -395,7 +459,7 @@ class Pilot:
                         self._int_b += b_rate * dt
                 else:
                     self._int_b += b_rate * dt
-                elev -= g.k_theta * (tr.theta_rad + dtheta - theta) - g.k_q * ym[ix["q_radps"]]
+                elev -= g.k_theta * (tr.theta_rad + dtheta - theta) - g.k_q * q
         return PilotCommand(
             t_s, max(-1.0, min(1.0, elev + de)), max(-1.0, min(1.0, ail + da)), max(-1.0, min(1.0, rud + dr)),
             max(0.0, min(1.0, thr + dthr)), h_ref, vc_ref, psi_ref, phi_ref,

@@ -23,31 +23,45 @@ turbulence = "moderate"
 """
 
 
-@pytest.mark.xfail(strict=False, reason="airspeed bar not met: at seed 11 the tuned autopilot holds altitude and bank with "
-                   "margin but airspeed misses by F-16 6.6 kt, DHC-6 10.5 kt; the speed estimate from this sensor suite "
-                   "(no GPS) alone errs 4-8 kt on the DHC-6 (issue 2 stays open)")
-@pytest.mark.parametrize("ac,h,speed", [
-    ("f16", 10000.0, "vt_kts = 400.0"),
-    ("DHC6", 5000.0, "vc_kts = 120.0"),
-])
-def test_autopilot_holds_in_moderate_turbulence(tmp_path: Path, ac: str, h: float, speed: str) -> None:
-    """Bar: 300 s, altitude within 100 ft, airspeed within 5 kt, bank within 5 deg of the commands.
+HOLD_CASES = [("f16", 10000.0, "vt_kts = 400.0"), ("DHC6", 5000.0, "vc_kts = 120.0")]
+
+
+def _hold(tmp_path: Path, ac: str, h: float, speed: str, seed: int):
+    """Fly the hold scenario; assert the bar: 300 s, altitude within 100 ft, airspeed within 5 kt,
+    bank within 5 deg of the commands.
 
     Airspeed is judged relative to the steady air mass (the random gust removed: no autothrottle
     can track a gust, and MIL-F-8785C moderate turbulence alone moves the airspeed by ~5 kt rms).
     """
-    sc = loads(HOLD.format(ac=ac, seed=11, h=h, speed=speed))
+    sc = loads(HOLD.format(ac=ac, seed=seed, h=h, speed=speed))
     res = run(sc, tmp_path, progress=False)
     s = res.summary
     assert res.status == "completed", s.reason
     assert s.max_abs_dh_ft < 100.0
     assert s.max_abs_dvc_kts < 5.0
     assert s.max_abs_dphi_deg < 5.0
+    return res
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("ac,h,speed", HOLD_CASES)
+def test_autopilot_holds_in_moderate_turbulence(tmp_path: Path, ac: str, h: float, speed: str, seed: int) -> None:
+    """Bar of issue 2 on two seeds per aircraft (more in the slow test below)."""
+    res = _hold(tmp_path, ac, h, speed, seed)
     # the same numbers recomputed from the log alone
     log = read_log(res.log_path)
     truth, cmd = log.topics["/truth/state"], log.topics["/commands/pilot"]
-    assert np.max(np.abs(truth["h_ft"] - cmd["h_ref_ft"])) == pytest.approx(s.max_abs_dh_ft)
+    assert np.max(np.abs(truth["h_ft"] - cmd["h_ref_ft"])) == pytest.approx(res.summary.max_abs_dh_ft)
+    assert np.max(np.abs(truth["phi_rad"] - cmd["phi_ref_rad"])) == pytest.approx(np.radians(res.summary.max_abs_dphi_deg))
     assert truth.t_s[-1] == pytest.approx(300.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(3, 13))
+@pytest.mark.parametrize("ac,h,speed", HOLD_CASES)
+def test_autopilot_holds_in_moderate_turbulence_more_seeds(tmp_path: Path, ac: str, h: float, speed: str, seed: int) -> None:
+    """The same bar on ten more seeds per aircraft (measured worst cases are in aircraft/DHC6/autopilot.toml)."""
+    _hold(tmp_path, ac, h, speed, seed)
 
 
 def _payloads(path: Path) -> dict[str, np.ndarray]:
