@@ -90,9 +90,9 @@ class SurfaceHandle:
 
     def hold(self, value_rad: float) -> None:
         """Fly ``value_rad`` [rad] until the next call or :meth:`release`."""
-        for n in self._nodes:
+        for i, n in enumerate(self._nodes):
             n.set_attribute(jsbsim.Attribute.WRITE, True)
-            n.set_double_value(value_rad)
+            n.set_double_value(value_rad * self.spec.scale(i))
             n.set_attribute(jsbsim.Attribute.WRITE, False)
         self.held = True
 

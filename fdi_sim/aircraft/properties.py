@@ -99,7 +99,8 @@ class SurfaceSpec:
     target : str
         Fault target name (``"elevator"``, ``"aileron"``, ``"rudder"``).
     positions : tuple of str
-        JSBSim nodes the aero model reads for this surface; a fault holds all of them.
+        JSBSim nodes the aero model reads for this surface; a fault holds all of them, node ``i``
+        at ``scales[i]`` times the surface angle.
     healthy : str
         The FCS component's own node: the position a healthy actuator would give [rad].
     min_deg, max_deg : float
@@ -118,6 +119,11 @@ class SurfaceSpec:
     max_deg: float
     rate_degps: float
     source: str
+    scales: tuple[float, ...] = ()
+
+    def scale(self, i: int) -> float:
+        """Node ``i``'s value per radian of surface angle (1 unless given)."""
+        return self.scales[i] if i < len(self.scales) else 1.0
 
 
 # F-16 (f16.xml, Flight Control): elevator kinematic -1..1 in 0.3 s on +-0.436 rad -> 167 deg/s;
@@ -130,8 +136,13 @@ SURFACES: dict[str, dict[str, SurfaceSpec]] = {
     "f16": {
         "elevator": SurfaceSpec("elevator", ("fcs/elevator-pos-rad",), "fcs/elevator-position", -25.0, 25.0, 167.0,
                                 "f16.xml fcs/elevator-position range +-0.436 rad, kinematic 0.3 s"),
-        "aileron": SurfaceSpec("aileron", ("fcs/aileron-pos-rad",), "fcs/aileron-control", -21.5, 21.5, 80.0,
-                               "f16.xml fcs/aileron-control range +-0.375 rad; rate assumed (Stevens & Lewis)"),
+        # the roll term reads fcs/aileron-pos-rad; the kinematic aileron path (left-aileron-pos-norm,
+        # +-1 for +-0.375 rad) drives the flaperons, whose mix enters lift and drag (JSBSIM_NOTES 1.2,
+        # bug 2): a roll-channel fault holds both, or the stick still moves the flaperons
+        "aileron": SurfaceSpec("aileron", ("fcs/aileron-pos-rad", "fcs/left-aileron-pos-norm"), "fcs/aileron-control",
+                               -21.5, 21.5, 80.0,
+                               "f16.xml fcs/aileron-control range +-0.375 rad; rate assumed (Stevens & Lewis)",
+                               scales=(1.0, 1.0 / 0.375)),
         "rudder": SurfaceSpec("rudder", ("fcs/rudder-pos-rad",), "fcs/rudder-control", -30.0, 30.0, 150.0,
                               "f16.xml fcs/rudder-control range +-0.524 rad, kinematic 0.4 s"),
     },

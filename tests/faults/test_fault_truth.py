@@ -185,3 +185,16 @@ def test_intermittent_stuck_surface_is_released_between_windows(tmp_path: Path) 
     assert span(1.0, 2.0) == 0.0 and span(3.0, 4.0) == 0.0  # jammed in each window (re-captured at onset)
     assert span(2.0, 3.0) > np.radians(1.0)  # released between: it follows the doublet again
     assert pos[(t >= 3.0) & (t < 4.0)][0] != pos[(t >= 1.0) & (t < 2.0)][0]
+
+
+@pytest.mark.parametrize("aircraft", ["f16", "DHC6"])
+def test_stuck_roll_channel_takes_every_aileron_path(aircraft: str, tmp_path: Path) -> None:
+    """A jammed roll channel: an aileron doublet changes nothing, neither the roll (the aero roll
+    term) nor, on the F-16, lift and drag through the flaperon mix of the kinematic aileron path."""
+    from conftest import doublet
+
+    faults = [{"type": "actuator-stuck-v1", "target": "aileron", "t_start_s": 2.0}]
+    with_d = fly(tmp_path, aircraft, faults=faults, maneuvers=[doublet("aileron", 3.0, 0.2)], duration_s=6.0)
+    without = fly(tmp_path, aircraft, faults=faults, duration_s=6.0)
+    for name in ("p_radps", "nx_g", "nz_g", "vt_fps"):
+        np.testing.assert_array_equal(with_d["/truth/state"][name], without["/truth/state"][name])
