@@ -60,17 +60,16 @@ import math
 import operator
 import tomllib
 from dataclasses import dataclass, fields
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
+from fdi_sim.data import AIRCRAFT_DATA  # aircraft/ in a checkout, packaged in a wheel
 from fdi_sim.isa import vt_from_vc
 from fdi_sim.pilot.maneuvers import AXES, HeadingChange, PulseTrain, RefRamp, Turn
 from fdi_sim.units import FPS_PER_KT, G0_FPS2, RAD_PER_DEG
 
-AIRCRAFT_DATA = Path(__file__).resolve().parents[2] / "aircraft"
 BLOCK_STEPS = 120  # maneuver tables are evaluated one block of steps at a time
 #: measurements the autopilot flies on
 NEEDED = ("h_ft", "hdot_fps", "vc_kts", "theta_rad", "q_radps", "phi_rad", "p_radps", "psi_rad", "r_radps", "nx_g", "ny_g",
