@@ -63,7 +63,9 @@ __all__ = [
     "ResidualShift",
     "SetResult",
     "StudyResult",
+    "P_CANDIDATES",
     "calibrate",
+    "choose_n_relations",
     "design_relations",
     "equal_detection_threshold",
     "evaluate",
@@ -93,7 +95,7 @@ class Relations:
 def robust_relations_with_offsets(
     models: Sequence[LinearModel], order_s: int, n_relations: int, offsets: Sequence[NDArray],
     weights: Sequence[float] | None = None, state_sqrt: NDArray | None = None, output_scale: NDArray | None = None,
-    input_scale: NDArray | None = None, **noise: NDArray | None,
+    input_scale: NDArray | None = None, name: str = "robust+trim", **noise: NDArray | None,
 ) -> Relations:
     """Robust relations of Lou et al. (eq. 18-23, 35, 41) with one extra column ``m_q`` per model.
 
@@ -102,7 +104,23 @@ def robust_relations_with_offsets(
     window of model q's trim in the common coordinates; ``T T' = sum a_q (R_q R_q' + m_q m_q')``,
     the window second moment. With all ``m_q = 0`` this is
     :func:`~fdi_sim.detectors.robust_parity.robust_parity` (tested). Scaling as there: the SVD is
-    done on ``diag(scale)^-1 T``.
+    done on ``diag(scale)^-1 T``; ``sigma_sq`` of the result is increasing, zero-padded.
+
+    Parameters
+    ----------
+    models : sequence of LinearModel
+        The Q discrete models (same signals).
+    order_s : int
+        Parity order s.
+    n_relations : int
+        p, the number of relations returned.
+    offsets : sequence of NDArray
+        One ``((s+1)(r + m_known),)`` window ``m_q`` per model (:func:`trim_offset_window`).
+    weights, state_sqrt, output_scale, input_scale, noise
+        As in :func:`~fdi_sim.detectors.robust_parity.robust_parity` (``state_sqrt`` one array
+        for all models).
+    name : str
+        Name of the returned set.
     """
     models = list(models)
     _check_same_size(models)
@@ -122,7 +140,7 @@ def robust_relations_with_offsets(
     order = np.concatenate([np.arange(k, N), np.arange(k - 1, -1, -1)]).astype(int)  # increasing sigma
     sig = np.concatenate([np.zeros(N - k), sv[::-1]])
     P = Uf[:, order[:n_relations]] / scale[:, None]
-    return Relations(name="robust+trim", P=P, sigma_sq=sig**2)
+    return Relations(name=name, P=P, sigma_sq=sig**2)
 
 
 def trim_offset_window(model: LinearModel, ref: LinearModel, order_s: int) -> NDArray[np.float64]:
@@ -419,6 +437,30 @@ def evaluate(cfg: StudyConfig, ms: ModelSet, flights: dict[str, list[FlightSampl
         results[name] = SetResult(name=name, n_relations=rel.n_relations, threshold=thr, detection=det, false_alarms=fa)
     return StudyResult(cfg=cfg, models=ms, noise=nm, relations=rels, calibration=cals, results=results, series=series,
                        shift=shift)
+
+
+#: numbers of relations tried when p is chosen on validation flights (:func:`choose_n_relations`)
+P_CANDIDATES: tuple[int, ...] = (1, 2, 3, 4, 6, 8, 11, 14, 17, 20, 24)
+
+
+def choose_n_relations(cfg: StudyConfig, ms: ModelSet, flights: dict[str, list[FlightSamples]],
+                       rng: np.random.Generator, name: str = "robust",
+                       candidates: Sequence[int] = P_CANDIDATES) -> tuple[int, dict[int, float]]:
+    """The p of relation set ``name`` with the fewest false alarms on ``flights`` (validation flights).
+
+    False alarms on the ``eta<max>`` group at thresholds for 0.9 detection on ``fault_eta0``; ties
+    go to the smaller p. The rate at the chosen p is biased low (it was chosen on these flights):
+    measure it again on fresh flights.
+
+    Returns
+    -------
+    p : int
+    rates : dict
+        p -> false-alarm rate on the validation flights [-].
+    """
+    key = ("fault_eta0", f"eta{max(cfg.etas):g}")
+    rates = {p: evaluate(cfg, ms, flights, rng, n_relations=p).results[name].false_alarms[key].rate for p in candidates}
+    return min(candidates, key=lambda p: (rates[p], p)), rates
 
 
 def run_study(cfg: StudyConfig, plan: FlightPlan, out_dir: str | Path, rng: np.random.Generator,

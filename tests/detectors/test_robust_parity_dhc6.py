@@ -1,7 +1,8 @@
 """Robust parity on the JSBSim DHC-6, clean and iced (issue 5 bar; docs/parity.md, "DHC-6 on JSBSim").
 
 Real JSBSim flights throughout. The default tests fly eleven flights of 40 s or less in calm air;
-the slow test flies the whole study of the docs (two conditions, 88 two-minute flights each).
+the slow test flies the whole study of the docs (two conditions, 88 two-minute flights each, and
+20 fresh iced flights).
 """
 from __future__ import annotations
 
@@ -26,9 +27,11 @@ from fdi_sim.detectors.dhc6_icing_flights import (
 from fdi_sim.detectors.dhc6_icing_study import (
     Relations,
     calibrate,
+    choose_n_relations,
     evaluate,
     false_alarm_rate,
     robust_relations_with_offsets,
+    run_study,
     statistics,
     trim_offset_window,
 )
@@ -208,19 +211,31 @@ def test_calm_air_equal_detection_false_alarms(models, calm_flights):
 
 @pytest.mark.slow
 def test_docs_study_numbers(tmp_path):
-    """The full study of docs/parity.md (about 8 min): light turbulence with a 2 deg bias, calm air with a
-    0.25 deg bias; p = 17 relations per set; thresholds for 0.9 detection on clean faulty flights."""
-    from fdi_sim.detectors.dhc6_icing_study import run_study
-
+    """The full study of docs/parity.md (about 10 min): light turbulence with a 2 deg bias, calm air with a
+    0.25 deg bias; thresholds for 0.9 detection on clean faulty flights. With p = 17 (fixed beforehand) no
+    robust set is measurably better than the nominal one in light turbulence, and in calm air only the
+    design with the iced trims is; with p chosen on the study's flights, Lou's robust relations are
+    measurably better on 20 fresh iced flights than the nominal ones and than the clean-only control."""
     key = ("fault_eta0", "eta0.1")
-    light = run_study(StudyConfig(turbulence="light", fault_bias_deg=2.0), FlightPlan(), tmp_path / "light",
-                      np.random.default_rng(2024))
+    cfg = StudyConfig(turbulence="light", fault_bias_deg=2.0)
+    ms = linearize_models(cfg)
+    flights = fly_all(cfg, FlightPlan(), tmp_path / "light")
+    light = evaluate(cfg, ms, flights, np.random.default_rng(2024))
     nom, rob, trim = (light.results[n].false_alarms[key] for n in ("nominal", "robust", "robust+trim"))
-    assert 0.2 < nom.rate < 0.5
-    assert rob.ci[0] < nom.ci[1] and nom.ci[0] < rob.ci[1]  # not measurably different
-    assert trim.ci[0] > nom.ci[1]                           # measurably worse
+    assert 0.1 < nom.rate < 0.7  # an informative comparison: neither never nor always
+    assert not rob.ci[1] < nom.ci[0] and not trim.ci[1] < nom.ci[0]  # neither robust set measurably lower
+    rng = np.random.default_rng(2027)
+    fresh = [fly(cfg, 0.1, seed, False, tmp_path / "fresh") for seed in range(9000, 9020)]
+    test = {**flights, "eta0.1": fresh}
+    nom_fresh = evaluate(cfg, ms, test, rng).results["nominal"].false_alarms[key]
+    fa_fresh = {}
+    for name in ("robust", "robust-clean"):
+        p, _ = choose_n_relations(cfg, ms, flights, rng, name)
+        fa_fresh[name] = evaluate(cfg, ms, test, rng, n_relations=p).results[name].false_alarms[key]
+    assert fa_fresh["robust"].ci[1] < nom_fresh.ci[0]
+    assert fa_fresh["robust"].ci[1] < fa_fresh["robust-clean"].ci[0]
     calm = run_study(StudyConfig(turbulence="none", fault_bias_deg=0.25), FlightPlan(), tmp_path / "calm",
                      np.random.default_rng(2025))
     nom, rob, trim = (calm.results[n].false_alarms[key] for n in ("nominal", "robust", "robust+trim"))
     assert nom.rate > 0.99 and rob.rate > 0.99
-    assert trim.ci[1] < 0.15
+    assert trim.ci[1] < 0.2
