@@ -211,7 +211,7 @@ def test_calm_air_equal_detection_false_alarms(models, calm_flights):
 
 @pytest.mark.slow
 def test_docs_study_numbers(tmp_path):
-    """The full study of docs/parity.md (about 10 min): light turbulence with a 2 deg bias, calm air with a
+    """The full study of docs/parity.md (about 7 min): light turbulence with a 2 deg bias, calm air with a
     0.25 deg bias; thresholds for 0.9 detection on clean faulty flights. With p = 17 (fixed beforehand) no
     robust set is measurably better than the nominal one in light turbulence, and in calm air only the
     design with the iced trims is; with p chosen on the study's flights, Lou's robust relations are
