@@ -5,6 +5,7 @@ different properties on each aircraft (the DHC-6 aero model reads the *left* ail
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -132,28 +133,33 @@ class SurfaceSpec:
 # Simulation (2nd ed., sec. 4.x; elevator 60, aileron 80, rudder 120 deg/s) -- an assumption.
 # DHC-6 (Systems/Conventional Controls.xml): cable-driven, no actuator model; 30 deg/s is the
 # documented assumption for a runaway autopilot servo or a jammed-then-released cable.
+def _deg(rad: float) -> float:
+    # stops are the XML ranges in rad, exactly (a rounded degree value would overshoot the model's stop)
+    return math.degrees(rad)
+
+
 SURFACES: dict[str, dict[str, SurfaceSpec]] = {
     "f16": {
-        "elevator": SurfaceSpec("elevator", ("fcs/elevator-pos-rad",), "fcs/elevator-position", -25.0, 25.0, 167.0,
+        "elevator": SurfaceSpec("elevator", ("fcs/elevator-pos-rad",), "fcs/elevator-position", _deg(-0.436), _deg(0.436), 167.0,
                                 "f16.xml fcs/elevator-position range +-0.436 rad, kinematic 0.3 s"),
         # the roll term reads fcs/aileron-pos-rad; the kinematic aileron path (left-aileron-pos-norm,
         # +-1 for +-0.375 rad) drives the flaperons, whose mix enters lift and drag (JSBSIM_NOTES 1.2,
         # bug 2): a roll-channel fault holds both, or the stick still moves the flaperons
         "aileron": SurfaceSpec("aileron", ("fcs/aileron-pos-rad", "fcs/left-aileron-pos-norm"), "fcs/aileron-control",
-                               -21.5, 21.5, 80.0,
+                               _deg(-0.375), _deg(0.375), 80.0,
                                "f16.xml fcs/aileron-control range +-0.375 rad; rate assumed (Stevens & Lewis)",
                                scales=(1.0, 1.0 / 0.375)),
-        "rudder": SurfaceSpec("rudder", ("fcs/rudder-pos-rad",), "fcs/rudder-control", -30.0, 30.0, 150.0,
+        "rudder": SurfaceSpec("rudder", ("fcs/rudder-pos-rad",), "fcs/rudder-control", _deg(-0.524), _deg(0.524), 150.0,
                               "f16.xml fcs/rudder-control range +-0.524 rad, kinematic 0.4 s"),
     },
     "DHC6": {
-        "elevator": SurfaceSpec("elevator", ("fcs/elevator-pos-rad",), "fcs/elevator-control", -26.0, 14.0, 30.0,
+        "elevator": SurfaceSpec("elevator", ("fcs/elevator-pos-rad",), "fcs/elevator-control", _deg(-0.454), _deg(0.244), 30.0,
                                 "Conventional Controls.xml Elevator Control range -0.454..0.244 rad; rate assumed"),
         # the aero model reads the left aileron as the roll-channel deflection; both are held
         "aileron": SurfaceSpec("aileron", ("fcs/left-aileron-pos-rad", "fcs/right-aileron-pos-rad"),
-                               "fcs/left-aileron-control", -16.0, 18.9, 30.0,
+                               "fcs/left-aileron-control", _deg(-0.28), _deg(0.33), 30.0,
                                "Conventional Controls.xml Left Aileron Control range -0.28..0.33 rad; rate assumed"),
-        "rudder": SurfaceSpec("rudder", ("fcs/rudder-pos-rad",), "fcs/rudder-control", -16.0, 16.0, 30.0,
+        "rudder": SurfaceSpec("rudder", ("fcs/rudder-pos-rad",), "fcs/rudder-control", _deg(-0.28), _deg(0.28), 30.0,
                               "Conventional Controls.xml Rudder Control range +-0.28 rad; rate assumed"),
     },
 }
