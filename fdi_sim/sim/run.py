@@ -45,7 +45,9 @@ from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
 from fdi_sim.units import DEG_PER_RAD, FPS_PER_KT, RAD_PER_DEG
 
 OP_SIGNALS = ("h_ft", "vc_kts", "mach", "alpha_rad", "flaps_deg", "icing_eta")
-PILOT_FIELDS = COMMAND_SIGNALS + ("h_ref_ft", "vc_ref_kts", "psi_ref_rad", "phi_ref_rad")
+# the pitch trim is set by the trim and held; logged so that detectors using the commands see the
+# whole elevator command (elevator + pitch trim) without recovering it from the surface
+PILOT_FIELDS = COMMAND_SIGNALS + ("h_ref_ft", "vc_ref_kts", "psi_ref_rad", "phi_ref_rad", "pitch_trim_cmd_norm")
 
 @dataclass(frozen=True)
 class RunSummary:
@@ -260,6 +262,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     dt = sc.dt_s
     n_steps = int(round(sc.duration_s / dt))
     h_agl_node = ac.node("position/h-agl-ft").get_double_value
+    pitch_trim = ac.node("fcs/pitch-trim-cmd-norm").get_double_value
     max_dh = max_dv = max_dphi = 0.0
     bar = _progress_bar(sc, progress)
     status, reason = "completed", ""
@@ -320,7 +323,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 if ch_valid is not None:
                     ch_valid.write(t_s, inj.valid)
             ch_cmd.write(t_s, (cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm,
-                               cmd.h_ref_ft, cmd.vc_ref_kts, cmd.psi_ref_rad, cmd.phi_ref_rad))
+                               cmd.h_ref_ft, cmd.vc_ref_kts, cmd.psi_ref_rad, cmd.phi_ref_rad, pitch_trim()))
             ch_op.write(t_s, (x[i_h], x[i_vc], x[i_mach], x[i_alpha], flaps_deg, eta))
             if k == n_steps:
                 break

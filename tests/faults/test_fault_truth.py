@@ -198,3 +198,13 @@ def test_stuck_roll_channel_takes_every_aileron_path(aircraft: str, tmp_path: Pa
     without = fly(tmp_path, aircraft, faults=faults, duration_s=6.0)
     for name in ("p_radps", "nx_g", "nz_g", "vt_fps"):
         np.testing.assert_array_equal(with_d["/truth/state"][name], without["/truth/state"][name])
+
+
+def test_pitch_trim_is_logged_with_the_commands(tmp_path: Path) -> None:
+    run = fly(tmp_path, "DHC6", duration_s=2.0, initial={"h_ft": 5000.0, "vc_kts": 100.0})
+    pt = run["/commands/pilot"]["pitch_trim_cmd_norm"]
+    assert np.ptp(pt) == 0.0 and abs(pt[0]) > 1e-3  # set by the running-engine trim, held
+    # the DHC-6 FCS gears elevator_cmd + pitch_trim into the surface (0.244 rad per unit trailing edge down)
+    c, s = run["/commands/pilot"], run["/truth/surfaces"]
+    total = c["elevator_cmd_norm"][:-1] + pt[:-1]
+    np.testing.assert_allclose(s["elevator_pos_rad"], np.where(total > 0, 0.244, 0.454) * total, atol=1e-9)
