@@ -19,7 +19,7 @@ import math
 from typing import Any
 
 from fdi_sim.errors import ScenarioError
-from fdi_sim.faults.quantities import allowed_units, native_unit, to_native
+from fdi_sim.faults.quantities import allowed_units, target_unit, to_native
 
 #: fault family -> the prefix of its type ids
 FAMILY_PREFIX = {"actuator": "actuator-", "engine": "engine-", "sensor": "sensor-", "airframe": "icing-"}
@@ -58,8 +58,7 @@ def check_faults(sc: Any) -> None:
             where = {"sensor": "its sensor suite has", "engine": "it has"}.get(d.family, "it has")
             raise ScenarioError(sc.source, f"{key}.target", f"{m.aircraft} has no {d.family} target {p.target!r} for {tid}",
                                 f"{where}: {', '.join(allowed)}")
-        native = "rad" if d.family == "actuator" and p.target != "throttle" else (
-            "norm" if p.target == "throttle" else native_unit(p.target) if d.family == "sensor" else None)
+        native = target_unit(d.family, p.target)
         for prefix, (_, is_rate) in type(p).MAGNITUDES.items():
             mag = p.magnitude(prefix)
             if mag is None or native is None:

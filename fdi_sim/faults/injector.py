@@ -31,11 +31,19 @@ import numpy as np
 from fdi_sim.faults.laws import actuator_value
 from fdi_sim.faults.params import FaultParams
 from fdi_sim.faults.profile import Profile, make_profile
-from fdi_sim.faults.quantities import native_unit, to_native
+from fdi_sim.faults.quantities import target_unit, to_native
 
 #: fastest throttle-lever travel assumed for a hard-over [1/s] (full travel in 0.5 s)
 THROTTLE_RATE_NORMPS = 2.0
-SURFACE_TARGETS = ("elevator", "aileron", "rudder")
+#: surface -> (local flow angle it floats with, sign of delta_float = sign r angle) (laws.py docstring)
+FLOAT_FLOW: dict[str, tuple[str, float]] = {"elevator": ("alpha_rad", -1.0), "rudder": ("beta_rad", 1.0)}
+
+
+def _blend_clip(v: float, healthy: float, level: float, c: dict) -> float:
+    """Ramp-in blend with the healthy value (exactly ``v`` at full level), clipped to the stops."""
+    if level < 1.0:
+        v = healthy + level * (v - healthy)
+    return min(max(v, c["lo"]), c["hi"])
 
 
 @dataclass(frozen=True)
@@ -84,6 +92,9 @@ class _Bound:
         self.law = d.law
         self.profile = Profile(())
         self.level = 0.0
+        self.active = False  # inside an on-window (the level may still be 0 at the first step of a ramp)
+        self.onset = False  # a window starts at this step
+        self.cleared = False  # a window ended at this step
         self.error = 0.0
         self.t_on = 0.0
         self._i = 0
@@ -93,24 +104,23 @@ class _Bound:
     def reset_profile(self, duration_s: float, rng: np.random.Generator) -> None:
         self.profile = make_profile(self.d.params, duration_s, rng)
         self.level, self.error, self.t_on, self._i = 0.0, 0.0, 0.0, 0
+        self.active = self.onset = self.cleared = False
 
-    def update(self, t_s: float) -> tuple[float, bool, bool]:
-        """Level at ``t_s`` and whether a window starts (onset) or ends (clear) here."""
+    def update(self, t_s: float) -> None:
+        """Level, activity and onset/clear flags at ``t_s`` [s] (windows walked incrementally)."""
         w = self.profile.windows
-        was = self.level > 0.0
+        was = self.active
         while self._i < len(w) and t_s >= w[self._i][1]:
             self._i += 1
-        lvl = 0.0
-        if self._i < len(w):
-            a, _ = w[self._i]
-            if t_s >= a:
-                r = self.profile.ramp_s
-                lvl = min(1.0, (t_s - a) / r) if r > 0 else 1.0
-                if not was:
-                    self.t_on = a
-                lvl = max(lvl, 1e-12)  # active from the first step of a window even while ramping from 0
-        self.level = lvl
-        return lvl, lvl > 0.0 and not was, was and lvl == 0.0
+        self.active = self._i < len(w) and t_s >= w[self._i][0]
+        self.level = 0.0
+        if self.active:
+            a, r = w[self._i][0], self.profile.ramp_s
+            self.level = min(1.0, (t_s - a) / r) if r > 0 else 1.0
+            if not was:
+                self.t_on = a
+        self.onset = self.active and not was
+        self.cleared = was and not self.active
 
 
 class FaultInjector:
@@ -142,10 +152,12 @@ class FaultInjector:
         self._truth_idx = {n: i for i, n in enumerate(truth_names)}
         self.valid = np.ones(len(sensor_names))
         self.has_dropout = any(d.law == "dropout" for d in defs)
+        self._row = [0.0] * (3 * len(self.faults))
         self.events: list[tuple[float, dict]] = []
         self._sensor, self._command, self._plant = [], [], []
         for f in self.faults:
             self._bind(f, aircraft)
+        self._icing = [f for f in self.faults if f.d.family == "airframe"]
 
     # ------------------------------------------------------------------ binding
     def _bind(self, f: _Bound, ac: Any) -> None:
@@ -153,7 +165,7 @@ class FaultInjector:
         c: dict[str, Any] = {}
         if d.family == "sensor":
             j = self.sensor_names.index(d.target)
-            native = native_unit(d.target)
+            native = target_unit(d.family, d.target)
             c.update(j=j, d=self._decim[j], ti=self._truth_idx[d.target])
             for key, rate in (("bias", False), ("drift", True), ("value", False), ("noise_std", False), ("size", False)):
                 m = p.magnitude(key)
@@ -165,7 +177,6 @@ class FaultInjector:
             self._bind_actuator(f, ac, c)
         elif d.family == "engine":
             i = int(d.target.rsplit("_", 1)[1])
-            c["engine"] = i
             c["loss"] = getattr(p, "loss", 1.0)
             if d.law == "flameout":
                 c["cut"] = lambda on, i=i: ac.set_engine_cutoff(i, on)
@@ -191,16 +202,20 @@ class FaultInjector:
 
     def _bind_actuator(self, f: _Bound, ac: Any, c: dict) -> None:
         d, p = f.d, f.d.params
+        native = target_unit(d.family, d.target)
+        c["flow_i"], c["float_sign"] = None, 0.0
         if d.target == "throttle":
-            native, lo, hi, fastest = "norm", 0.0, 1.0, THROTTLE_RATE_NORMPS
+            lo, hi, fastest = 0.0, 1.0, THROTTLE_RATE_NORMPS
             self._command.append(f)
         else:
             h = ac.surface(d.target)
             spec = h.spec
-            native, lo, hi = "rad", math.radians(spec.min_deg), math.radians(spec.max_deg)
+            lo, hi = math.radians(spec.min_deg), math.radians(spec.max_deg)
             fastest = math.radians(spec.rate_degps)
             c["handle"] = h
-            c["flow"] = {"elevator": ("alpha_rad", -1.0), "rudder": ("beta_rad", 1.0)}.get(d.target)
+            if d.target in FLOAT_FLOW:  # the local flow angle a released surface trails with (laws.py)
+                signal, c["float_sign"] = FLOAT_FLOW[d.target]
+                c["flow_i"] = self._truth_idx[signal]
             self._plant.append(f)
         c.update(lo=lo, hi=hi)
         for key in ("position", "bias", "amplitude"):
@@ -218,11 +233,6 @@ class FaultInjector:
             c["rate"] = abs(rate)
         c.update(effectiveness=getattr(p, "effectiveness", 1.0), frequency_hz=getattr(p, "frequency_hz", 0.0),
                  float_ratio=getattr(p, "float_ratio", 0.0), tau_s=getattr(p, "tau_s", 1.0))
-        if c.get("flow"):
-            c["float_sign"] = c["flow"][1]
-            c["flow_i"] = self._truth_idx[c["flow"][0]]
-        else:
-            c["float_sign"], c["flow_i"] = 0.0, None
         c["p"] = c["p0"] = 0.0  # throttle: last faulty command and onset command
 
     # ------------------------------------------------------------------ run
@@ -231,11 +241,9 @@ class FaultInjector:
         for f in self.faults:
             f.reset_profile(self.duration_s, np.random.default_rng(rng.integers(2**63)))
             f.rng = np.random.default_rng(rng.integers(2**63))
-            f.c["out"] = None
             f.c["buf"] = []
         self.valid[:] = 1.0
         self.events = [(0.0, {"event": "catalog", "faults": self.catalog()})]
-        self._last_cmd_throttle = None
 
     def catalog(self) -> list[dict]:
         """Every fault: label, type, target, parameters as written, windows [s]."""
@@ -248,26 +256,25 @@ class FaultInjector:
         return tuple(f"{lab}_{s}" for lab in self.labels for s in ("active", "level", "error"))
 
     def truth_row(self) -> list[float]:
-        out: list[float] = []
-        for f in self.faults:
-            out += (1.0 if f.level > 0.0 else 0.0, f.level, f.error)
+        """``active, level, error`` of every fault now (one list, refilled each step)."""
+        out = self._row
+        for i, f in enumerate(self.faults):
+            out[3 * i], out[3 * i + 1], out[3 * i + 2] = (1.0 if f.active else 0.0), f.level, f.error
         return out
 
     def begin_step(self, t_s: float) -> None:
+        """Every fault's level and onset/clear at ``t_s`` [s]; onsets and clears become events."""
         for f in self.faults:
-            _, onset, cleared = f.update(t_s)
-            if onset:
-                f.c["onset"] = True
-                self.events.append((t_s, {"event": "onset", "label": f.label, "type": f.d.type_id, "target": f.d.target}))
-            elif cleared:
-                f.c["cleared"] = True
-                self.events.append((t_s, {"event": "clear", "label": f.label, "type": f.d.type_id, "target": f.d.target}))
+            f.update(t_s)
+            if f.onset or f.cleared:
+                self.events.append((t_s, {"event": "onset" if f.onset else "clear", "label": f.label,
+                                          "type": f.d.type_id, "target": f.d.target}))
 
     def sensors(self, t_s: float, k: int, y: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Faulty measurements from the healthy ones ``y`` and the truth ``x`` (a new array)."""
-        if not self._sensor:
-            return y
-        y = y.copy()
+        """Faulty measurements from the healthy ones ``y`` and the truth ``x``.
+
+        ``y`` is changed in place (the suite returns a new array every step) and returned.
+        """
         for f in self._sensor:
             c = f.c
             j = c["j"]
@@ -277,16 +284,14 @@ class FaultInjector:
                 buf.append(yh)
                 if len(buf) > c["delay_steps"] + 1:
                     del buf[0]
-            w = f.level
-            onset = c.pop("onset", False)
-            if c.pop("cleared", False) and f.law == "dropout":
+            if f.cleared and f.law == "dropout":
                 self.valid[j] = 1.0
-            if w == 0.0:
+            if not f.active:
                 f.error = 0.0
                 c["last"] = yh
                 continue
-            if onset or k % c["d"] == 0 or c["out"] is None:
-                c["out"] = self._sensor_value(f, t_s, yh, x, onset)
+            if f.onset or k % c["d"] == 0:
+                c["out"] = self._sensor_value(f, t_s, yh, x, f.onset)
             y[j] = c["out"]
             f.error = c["out"] - yh
             c["last"] = c["out"]
@@ -328,18 +333,14 @@ class FaultInjector:
         for f in self._command:
             if f.d.family != "actuator":
                 continue
-            c, w = f.c, f.level
-            c.pop("cleared", None)
-            if w == 0.0:
+            c = f.c
+            if not f.active:
                 f.error = 0.0
                 c["p"] = th
                 continue
-            if c.pop("onset", False):
+            if f.onset:
                 c["p0"] = c["p"]
-            v = actuator_value(f.law, c, t_s, f.t_on, th, c["p"], c["p0"], self.dt_s, 0.0)
-            if w < 1.0:  # ramp-in: blend with the healthy value (exactly v at full level)
-                v = th + w * (v - th)
-            v = min(max(v, c["lo"]), c["hi"])
+            v = _blend_clip(actuator_value(f.law, c, t_s, f.t_on, th, c["p"], c["p0"], self.dt_s, 0.0), th, f.level, c)
             f.error = v - th
             c["p"] = v
             th = v
@@ -351,10 +352,7 @@ class FaultInjector:
         for f in self._command:
             if f.d.family == "engine":
                 c, w = f.c, f.level
-                c.pop("onset", None)
-                c.pop("cleared", None)
-                frac = 1.0 - w * c["loss"]
-                c["throttle"](self._throttle * frac)
+                c["throttle"](self._throttle * (1.0 - w * c["loss"]))
                 f.error = w * c["loss"]
 
     def plant(self, t_s: float, x: np.ndarray) -> None:
@@ -362,12 +360,11 @@ class FaultInjector:
         for f in self._plant:
             c, w = f.c, f.level
             fam = f.d.family
-            onset = c.pop("onset", False)
-            cleared = c.pop("cleared", False)
+            onset, cleared = f.onset, f.cleared
             if fam == "actuator":
                 h = c["handle"]
-                if w == 0.0:
-                    if cleared or h.held:
+                if not f.active:
+                    if h.held:
                         h.release()
                     f.error = 0.0
                     continue
@@ -375,10 +372,7 @@ class FaultInjector:
                 if onset:
                     c["p0"] = p
                 flow = float(x[c["flow_i"]]) if c["flow_i"] is not None else 0.0
-                v = actuator_value(f.law, c, t_s, f.t_on, healthy, p, c["p0"], self.dt_s, flow)
-                if w < 1.0:  # ramp-in: blend with the healthy value (exactly v at full level)
-                    v = healthy + w * (v - healthy)
-                v = min(max(v, c["lo"]), c["hi"])
+                v = _blend_clip(actuator_value(f.law, c, t_s, f.t_on, healthy, p, c["p0"], self.dt_s, flow), healthy, w, c)
                 h.hold(v)
                 f.error = v - healthy
             elif fam == "engine":
@@ -387,7 +381,7 @@ class FaultInjector:
                         c["cut"](True)
                     elif cleared:
                         c["cut"](False)
-                    f.error = 1.0 if w > 0.0 else 0.0
+                    f.error = 1.0 if f.active else 0.0
                 else:
                     c["scale"](1.0 - w * c["loss"])
                     f.error = w * c["loss"]
@@ -399,12 +393,15 @@ class FaultInjector:
 
     def initial_icing_eta(self) -> float:
         """Icing severity at t = 0 (for the trim), after :meth:`reset`."""
-        return sum(f.c["eta_final"] * f.profile.level(0.0) for f in self._plant if f.d.family == "airframe")
+        return sum(f.c["eta_final"] * f.profile.level(0.0) for f in self._icing)
 
     @property
     def icing_eta(self) -> float:
-        """Current icing severity (0 without an icing fault)."""
-        return sum(f.error for f in self._plant if f.d.family == "airframe")
+        """Current icing severity (0 without an icing fault; faults on one target do not overlap)."""
+        for f in self._icing:
+            if f.active:
+                return f.error
+        return 0.0
 
     def pop_events(self) -> list[tuple[float, dict]]:
         ev, self.events = self.events, []

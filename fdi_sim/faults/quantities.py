@@ -41,6 +41,16 @@ def native_unit(signal: str) -> str:
     return unit
 
 
+def target_unit(family: str, target: str) -> str | None:
+    """Native unit of a fault target: rad for surfaces, norm for the throttle, a sensor's suffix;
+    None for engines and the airframe (their magnitudes are dimensionless)."""
+    if family == "actuator":
+        return "norm" if target == "throttle" else "rad"
+    if family == "sensor":
+        return native_unit(target)
+    return None
+
+
 def allowed_units(native: str, rate: bool = False) -> tuple[str, ...]:
     """Units a magnitude of a target in unit ``native`` may be given in (``rate``: per second)."""
     dim = _UNIT_DIM[native]

@@ -262,7 +262,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     dt = sc.dt_s
     n_steps = int(round(sc.duration_s / dt))
     h_agl_node = ac.node("position/h-agl-ft").get_double_value
-    pitch_trim = ac.node("fcs/pitch-trim-cmd-norm").get_double_value
+    pitch_trim = ac.node("fcs/pitch-trim-cmd-norm").get_double_value()  # set by the trim, held (read once)
     max_dh = max_dv = max_dphi = 0.0
     bar = _progress_bar(sc, progress)
     status, reason = "completed", ""
@@ -323,7 +323,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 if ch_valid is not None:
                     ch_valid.write(t_s, inj.valid)
             ch_cmd.write(t_s, (cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm,
-                               cmd.h_ref_ft, cmd.vc_ref_kts, cmd.psi_ref_rad, cmd.phi_ref_rad, pitch_trim()))
+                               cmd.h_ref_ft, cmd.vc_ref_kts, cmd.psi_ref_rad, cmd.phi_ref_rad, pitch_trim))
             ch_op.write(t_s, (x[i_h], x[i_vc], x[i_mach], x[i_alpha], flaps_deg, eta))
             if k == n_steps:
                 break
