@@ -275,19 +275,20 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
             t_s = k * dt
             x = read_truth()
             # --- divergence checks on the truth (NaN, ground, departure) -------------------------
-            if not np.isfinite(x).all():
+            xl = x.tolist()  # scalar reads below from a list: numpy scalar indexing costs more per read
+            if not math.isfinite(sum(xl)):  # one NaN or inf makes the sum non-finite
                 bad = [TRUTH_SIGNALS[i] for i in np.flatnonzero(~np.isfinite(x))[:3]]
                 raise SimulationDiverged(t_s, f"non-finite state ({', '.join(bad)})")
             if h_agl_node() <= 0.0:
                 raise SimulationDiverged(t_s, "ground impact")
-            if not (a_lo <= x[i_alpha] <= a_hi):
-                raise SimulationDiverged(t_s, f"alpha {x[i_alpha] * DEG_PER_RAD:.1f} deg outside [{lim.alpha_min_deg}, {lim.alpha_max_deg}]")
-            if abs(x[i_phi]) > phi_max:
-                raise SimulationDiverged(t_s, f"bank {x[i_phi] * DEG_PER_RAD:.1f} deg beyond {lim.phi_max_deg}")
-            if max(abs(x[i_p]), abs(x[i_q]), abs(x[i_r])) > rate_max:
+            if not (a_lo <= xl[i_alpha] <= a_hi):
+                raise SimulationDiverged(t_s, f"alpha {xl[i_alpha] * DEG_PER_RAD:.1f} deg outside [{lim.alpha_min_deg}, {lim.alpha_max_deg}]")
+            if abs(xl[i_phi]) > phi_max:
+                raise SimulationDiverged(t_s, f"bank {xl[i_phi] * DEG_PER_RAD:.1f} deg beyond {lim.phi_max_deg}")
+            if max(abs(xl[i_p]), abs(xl[i_q]), abs(xl[i_r])) > rate_max:
                 raise SimulationDiverged(t_s, f"body rate beyond {rate_max} rad/s")
-            if x[i_vc] < vc_min:
-                raise SimulationDiverged(t_s, f"airspeed {x[i_vc]:.1f} kt below {vc_min}")
+            if xl[i_vc] < vc_min:
+                raise SimulationDiverged(t_s, f"airspeed {xl[i_vc]:.1f} kt below {vc_min}")
             y = sensors.step(t_s, x).y
             if inj is None:
                 cmd = pilot.step(t_s, y)
@@ -302,10 +303,10 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 inj.plant(t_s, x)
                 eta = inj.icing_eta
             # --- statistics: deviation from the references (airspeed relative to the steady air) --
-            v_air = math.sqrt((x[i_vn] - wn) ** 2 + (x[i_ve] - we) ** 2 + x[i_vd] ** 2)
-            dv = abs(x[i_vc] * v_air / x[i_vt] - cmd.vc_ref_kts)
-            dh = abs(x[i_h] - cmd.h_ref_ft)
-            dphi = abs(x[i_phi] - cmd.phi_ref_rad) * DEG_PER_RAD
+            v_air = math.sqrt((xl[i_vn] - wn) ** 2 + (xl[i_ve] - we) ** 2 + xl[i_vd] ** 2)
+            dv = abs(xl[i_vc] * v_air / xl[i_vt] - cmd.vc_ref_kts)
+            dh = abs(xl[i_h] - cmd.h_ref_ft)
+            dphi = abs(xl[i_phi] - cmd.phi_ref_rad) * DEG_PER_RAD
             if dh > max_dh:
                 max_dh = dh
             if dv > max_dv:
@@ -324,7 +325,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                     ch_valid.write(t_s, inj.valid)
             ch_cmd.write(t_s, (cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm,
                                cmd.h_ref_ft, cmd.vc_ref_kts, cmd.psi_ref_rad, cmd.phi_ref_rad, pitch_trim))
-            ch_op.write(t_s, (x[i_h], x[i_vc], x[i_mach], x[i_alpha], flaps_deg, eta))
+            ch_op.write(t_s, (xl[i_h], xl[i_vc], xl[i_mach], xl[i_alpha], flaps_deg, eta))
             if k == n_steps:
                 break
             if not ac.step():
