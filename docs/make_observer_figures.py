@@ -275,9 +275,11 @@ def fig_mmae() -> None:
     rng = np.random.default_rng(1)
     bank = MultipleModelBank(designs, ["clean", "eta 0.1", "eta 0.2"], alarm_probability=0.95)
     P = []
+    md = clean  # the plant flown; re-linearized every 60 steps as the ice grows
     for k in range(n):
         eta = 0.0 if t[k] < 20 else min(0.2, 0.01 * (t[k] - 20))  # ice accretes from 20 s, 0.01 per s
-        md = twin_otter_longitudinal_interim(eta).discretize(DT) if k % 60 == 0 else md
+        if k % 60 == 0:
+            md = twin_otter_longitudinal_interim(eta).discretize(DT)
         y = md.C @ x + rng.multivariate_normal(np.zeros(4), RD) + clean.y0
         P.append(bank.step(t[k], u[k] + clean.u0, y).scores)
         x = md.A @ x + md.B @ u[k] + rng.multivariate_normal(np.zeros(4), QD)

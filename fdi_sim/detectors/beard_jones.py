@@ -242,7 +242,6 @@ def detection_space(A: NDArray, C: NDArray, f: NDArray, name: str = "f", rtol: f
     """
     A, C = np.asarray(A, float), np.asarray(C, float)
     f = np.asarray(f, float).reshape(-1)
-    n = A.shape[0]
     check_observable(A, C, rtol)
     mu, fmu = _first_visible_power(A, C, f, rtol)
     if mu < 0:

@@ -14,9 +14,9 @@ system scales ``c = elevator_cmd + pitch_trim`` by 0.244 rad per unit trailing-e
 0.454 rad per unit trailing-edge up (Conventional Controls.xml, :data:`ELEVATOR_RANGE_RAD`), and in light turbulence ``c`` is below zero in a
 third of the steps at 100 KIAS (clean trim c = 0.012). The gearing is known to any
 FCS, so the detector applies it; the linearizer's command column is converted with the slope it
-differenced (:func:`longitudinal_model`). The pitch-trim setting is not logged by the simulation
-(it is not on ``/commands/pilot``); it is recovered from the first, fault-free step of a log as
-``g^-1(elevator_pos) - elevator_cmd``. The iced trim needs more pitch trim (0.057 against 0.012 at
+differenced (:func:`longitudinal_model`). The pitch-trim setting is read from ``/commands/pilot``
+(``pitch_trim_cmd_norm``, set by the trim and held); logs written before it was logged give it
+from their first, fault-free step as ``g^-1(elevator_pos) - elevator_cmd``. The iced trim needs more pitch trim (0.057 against 0.012 at
 eta 0.1), so a detector that ignored it would see the iced trim as a 0.6 deg elevator fault.
 """
 from __future__ import annotations
@@ -30,7 +30,15 @@ from numpy.typing import NDArray
 from fdi_sim.aircraft.linearize import FDSettings
 from fdi_sim.aircraft.model import Aircraft
 from fdi_sim.errors import DesignError
-from fdi_sim.flightlog import FlightLog, read_log
+from fdi_sim.flightlog import (
+    TOPIC_COMMANDS,
+    TOPIC_FAULTS,
+    TOPIC_SENSORS,
+    TOPIC_SURFACES,
+    TOPIC_TRUTH_STATE,
+    FlightLog,
+    read_log,
+)
 from fdi_sim.linear.linearize import linearize
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.linear.transform import discretize
@@ -263,29 +271,31 @@ def flight_samples(log: FlightLog, dt_s: float, eta: float, seed: int) -> Flight
     Raises
     ------
     DesignError
-        ``dt_s`` is not a multiple of the simulation step, or the elevator fault is on at t = 0.
+        ``dt_s`` is not a multiple of the simulation step, or (a log without the pitch trim) the
+        elevator fault is on at t = 0.
     """
-    meas, cmd, surf, truth = (log.topics[t] for t in ("/sensors/measurements", "/commands/pilot", "/truth/surfaces",
-                                                       "/truth/state"))
+    meas, cmd, surf, truth = (log.topics[t] for t in (TOPIC_SENSORS, TOPIC_COMMANDS, TOPIC_SURFACES, TOPIC_TRUTH_STATE))
     dt_sim = float(cmd.t_s[1] - cmd.t_s[0])
     n_sub = int(round(dt_s / dt_sim))
     if n_sub < 1 or abs(n_sub * dt_sim - dt_s) > 1e-9:
         raise DesignError(f"dt_s = {dt_s} is not a multiple of the simulation step {dt_sim}")
     n_steps = len(surf)  # surfaces are logged after each step: one fewer than the commands
     n = n_steps // n_sub
-    # pitch trim from the first (fault-free) step: elevator_pos = g(cmd + trim)
-    ptrim = float(elevator_gearing_inverse(surf["elevator_pos_rad"][0]) - cmd["elevator_cmd_norm"][0])
+    idx = np.arange(n) * n_sub
+    fault = np.zeros(n, bool)
+    if TOPIC_FAULTS in log.topics and f"{FAULT_LABEL}_active" in log.topics[TOPIC_FAULTS].fields:
+        fault = log.topics[TOPIC_FAULTS][f"{FAULT_LABEL}_active"][idx] > 0.5
+    if "pitch_trim_cmd_norm" in cmd.fields:  # logged with the commands: set by the trim, held
+        ptrim = float(cmd["pitch_trim_cmd_norm"][0])
+    elif fault[0]:
+        raise DesignError("the elevator fault is active at t = 0, where the pitch trim is read from this log "
+                          "(written without pitch_trim_cmd_norm); start it later (fault_start_s > 0)")
+    else:  # an older log: from the first (fault-free) step, elevator_pos = g(cmd + trim)
+        ptrim = float(elevator_gearing_inverse(surf["elevator_pos_rad"][0]) - cmd["elevator_cmd_norm"][0])
     delta = elevator_gearing(cmd["elevator_cmd_norm"][:n * n_sub] + ptrim)
     thr = cmd["throttle_cmd_norm"][:n * n_sub]
     u = np.stack([delta.reshape(n, n_sub).mean(1), thr.reshape(n, n_sub).mean(1)], axis=1)
-    idx = np.arange(n) * n_sub
     y = np.stack([meas[o][idx] for o in LON_OUTPUTS], axis=1)
-    fault = np.zeros(n, bool)
-    if "/faults/active" in log.topics and f"{FAULT_LABEL}_active" in log.topics["/faults/active"].fields:
-        fault = log.topics["/faults/active"][f"{FAULT_LABEL}_active"][idx] > 0.5
-        if fault[0]:
-            raise DesignError("the elevator fault is active at t = 0, where the pitch trim is read from the log; "
-                              "start it later (fault_start_s > 0)")
     tx = np.full((n, len(LON_STATES)), np.nan)
     # the model's vt and alpha are those of the Earth-relative body velocity (the log's vt_fps and
     # alpha_rad are air-relative, gusts included): Vt = |(u, v, w)|, alpha = atan2(w, u)

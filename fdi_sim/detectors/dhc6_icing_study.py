@@ -50,7 +50,15 @@ from fdi_sim.detectors.dhc6_icing_flights import (
     windows,
 )
 from fdi_sim.detectors.parity import parity_space
-from fdi_sim.detectors.robust_parity import _check_same_size, _weights, design_block, robust_parity
+from fdi_sim.detectors.robust_parity import (
+    check_same_size,
+    design_block,
+    increasing_svd,
+    prior_weights,
+    robust_parity,
+    window_scale,
+)
+from fdi_sim.detectors.window_detector import _psd_sqrt
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.sensors import load_suite
@@ -123,23 +131,16 @@ def robust_relations_with_offsets(
         Name of the returned set.
     """
     models = list(models)
-    _check_same_size(models)
-    a = _weights(weights, len(models))
+    check_same_size(models)
+    a = prior_weights(weights, len(models))
     blocks = []
     for q, (m, off) in enumerate(zip(models, offsets, strict=True)):
         Rq = design_block(m, order_s, state_sqrt, "known", **noise)
         blocks.append(np.sqrt(a[q]) * np.hstack([Rq, np.asarray(off, float).reshape(-1, 1)]))
     T = np.hstack(blocks)  # T = [sqrt(a_1) [R_1, m_1] ... ]  (eq. 16, 35, 41 plus the trim column)
-    L = order_s + 1
-    n_u = len(models[0].control_columns())
-    r = models[0].n_outputs
-    scale = np.concatenate([np.tile(np.ones(r) if output_scale is None else np.asarray(output_scale, float), L),
-                            np.tile(np.ones(n_u) if input_scale is None else np.asarray(input_scale, float), L)])
-    Uf, sv, _ = np.linalg.svd(T / scale[:, None], full_matrices=True)
-    N, k = T.shape[0], sv.size
-    order = np.concatenate([np.arange(k, N), np.arange(k - 1, -1, -1)]).astype(int)  # increasing sigma
-    sig = np.concatenate([np.zeros(N - k), sv[::-1]])
-    P = Uf[:, order[:n_relations]] / scale[:, None]
+    scale = window_scale(output_scale, input_scale, models[0].n_outputs, len(models[0].control_columns()), order_s)
+    U_inc, sig = increasing_svd(T / scale[:, None])
+    P = U_inc[:, :n_relations] / scale[:, None]
     return Relations(name=name, P=P, sigma_sq=sig**2)
 
 
@@ -209,9 +210,8 @@ def noise_model(train: Sequence[FlightSamples], ref: LinearModel, skip_s: float)
         gs.append(fs.gust_body_fps[keep])
     X, U, G = np.vstack(xs), np.vstack(us), np.vstack(gs)
     S = X.T @ X / len(X)  # second moment about the trim
-    w, V = np.linalg.eigh((S + S.T) / 2)
-    M = V @ np.diag(np.sqrt(np.clip(w, 0.0, None)))
-    return NoiseModel(measurement_std=sensor_noise_std(), input_std=U.std(0), gust_std_fps=G.std(0), state_sqrt=M)
+    return NoiseModel(measurement_std=sensor_noise_std(), input_std=U.std(0), gust_std_fps=G.std(0),
+                      state_sqrt=_psd_sqrt(S))
 
 
 def design_relations(ms: ModelSet, cfg: StudyConfig, nm: NoiseModel, n_relations: int | None = None) -> dict[str, Relations]:

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from scipy.stats import binomtest
 
 from fdi_sim.detectors.parity import AdditiveFaults, input_toeplitz, observability_matrix, parity_space
-from fdi_sim.detectors.robust_parity import _check_same_size, design_block, robust_parity
+from fdi_sim.detectors.robust_parity import check_same_size, design_block, robust_parity
 from fdi_sim.detectors.window_detector import _inverse_sqrt, _psd_sqrt
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
@@ -144,7 +144,7 @@ def compare_nominal_vs_robust(
     :func:`~fdi_sim.detectors.robust_parity.robust_parity`).
     """
     models = [nominal, *perturbed]
-    _check_same_size(models)
+    check_same_size(models)
     labels = tuple(labels) if labels is not None else ("nominal",) + tuple(f"perturbed[{k}]" for k in range(len(perturbed)))
     if len(labels) != len(models):
         raise DesignError(f"{len(labels)} labels for {len(models)} models")

@@ -39,14 +39,18 @@ __all__ = [
     "DetectionRobustness",
     "RobustParity",
     "SSvd",
+    "check_same_size",
     "design_block",
     "example_icing_models",
     "detection_robustness",
+    "increasing_svd",
     "make_robust_parity_detector",
+    "prior_weights",
     "robust_parity",
     "robustness_cost",
     "s_svd",
     "stationary_state_sqrt",
+    "window_scale",
 ]
 
 INPUT_MODES = ("known", "noise", "ignore")
@@ -159,7 +163,8 @@ def design_block(
     return Rq
 
 
-def _check_same_size(models: Sequence[LinearModel], what: str = "models") -> None:
+def check_same_size(models: Sequence[LinearModel], what: str = "models") -> None:
+    """Raise DesignError unless ``models`` are discrete, of one size and sample time, with the same input kinds."""
     if len(models) == 0:
         raise DesignError(f"give at least one model in {what}")
     ref = models[0]
@@ -175,11 +180,43 @@ def _check_same_size(models: Sequence[LinearModel], what: str = "models") -> Non
             raise DesignError(f"{what}[{q}] has dt_s={m.dt_s}; all models must be discrete with dt_s={ref.dt_s}")
 
 
-def _weights(weights: Sequence[float] | None, Q: int) -> NDArray[np.float64]:
+def prior_weights(weights: Sequence[float] | None, Q: int) -> NDArray[np.float64]:
+    """The prior probabilities a_q of Q models (Lou et al. eq. 24): 1/Q each by default, else validated."""
     a = np.full(Q, 1.0 / Q) if weights is None else np.asarray(weights, float)
     if a.shape != (Q,) or np.any(a <= 0) or not np.all(np.isfinite(a)):
         raise DesignError(f"weights must be {Q} positive numbers (prior probabilities a_q of eq. 24), got {weights}")
     return a
+
+
+# the names these had while private (kept for callers that import them)
+_check_same_size = check_same_size
+_weights = prior_weights
+
+
+def window_scale(
+    output_scale: NDArray | None, input_scale: NDArray | None, n_outputs: int, n_known: int, order_s: int
+) -> NDArray[np.float64]:
+    """(N,) scale of the stacked window ``[Y; U]``: each signal's scale repeated over the s + 1 samples.
+
+    ``None`` is no scaling (ones); otherwise ``n_outputs`` and ``n_known`` positive numbers [signal units].
+    """
+    L = order_s + 1
+    return np.concatenate([
+        np.tile(_positive(output_scale, n_outputs, "output_scale"), L),
+        np.tile(_positive(input_scale, n_known, "input_scale"), L) if n_known else np.zeros(0),
+    ])
+
+
+def increasing_svd(T: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """All left singular vectors of ``T`` and its singular values, in increasing order (Lou et al. eq. 18-19).
+
+    Rows beyond the column count have sigma = 0 (zero padding, sec. 3), so ``sigma`` has one
+    entry per row of ``T`` and the first columns of ``U`` are the most robust relations.
+    """
+    Uf, sv, _ = np.linalg.svd(T, full_matrices=True)
+    N, k = T.shape[0], sv.size
+    order = np.concatenate([np.arange(k, N), np.arange(k - 1, -1, -1)]).astype(int)
+    return Uf[:, order], np.concatenate([np.zeros(N - k), sv[::-1]])
 
 
 @dataclass(frozen=True, eq=False)
@@ -295,9 +332,9 @@ def robust_parity(
         Models of different sizes, bad weights or scalings, or p outside 1..N.
     """
     models = list(models)
-    _check_same_size(models)
+    check_same_size(models)
     Q = len(models)
-    a = _weights(weights, Q)
+    a = prior_weights(weights, Q)
     if isinstance(state_sqrt, (list, tuple)):
         if len(state_sqrt) != Q:
             raise DesignError(f"state_sqrt has {len(state_sqrt)} entries for {Q} models")
@@ -308,18 +345,10 @@ def robust_parity(
                                            disturbance_sqrt, measurement_sqrt) for q in range(Q)]
     T = np.hstack(blocks)  # T = [sqrt(a_1) R_1 ... sqrt(a_Q) R_Q]  (eq. 16, 35)
     N = T.shape[0]
-    L = order_s + 1
     cu = tuple(input_columns(models[0], "control")) if inputs == "known" else ()
-    scale = np.concatenate([
-        np.tile(_positive(output_scale, models[0].n_outputs, "output_scale"), L),
-        np.tile(_positive(input_scale, len(cu), "input_scale"), L) if cu else np.zeros(0),
-    ])
+    scale = window_scale(output_scale, input_scale, models[0].n_outputs, len(cu), order_s)
     T = T / scale[:, None]
-    Uf, sv, _ = np.linalg.svd(T, full_matrices=True)
-    k = sv.size
-    # increasing order; rows beyond the column count have sigma = 0 (zero padding, sec. 3)
-    order = np.concatenate([np.arange(k, N), np.arange(k - 1, -1, -1)]).astype(int)
-    sigma = np.concatenate([np.zeros(N - k), sv[::-1]])
+    U_inc, sigma = increasing_svd(T)
     ny = (order_s + 1) * models[0].n_outputs
     if n_relations is None:
         n_relations = parity_basis(observability_matrix(models[0].A, models[0].C, order_s)).shape[1]
@@ -327,7 +356,7 @@ def robust_parity(
             raise DesignError(f"order s={order_s} gives no exact parity relation for models[0]; pass n_relations or raise order_s")
     if not 1 <= int(n_relations) <= N:
         raise DesignError(f"n_relations must be between 1 and N={N}, got {n_relations}")
-    return RobustParity(order_s=int(order_s), U=Uf[:, order], sigma=sigma, T=T, n_relations=int(n_relations),
+    return RobustParity(order_s=int(order_s), U=U_inc, sigma=sigma, T=T, n_relations=int(n_relations),
                         n_y=ny, known_inputs=cu, weights=a, scale=scale)
 
 
@@ -423,9 +452,9 @@ def detection_robustness(
         Different model sizes or no relation that grows under the failure.
     """
     unfailed, failed = list(unfailed), list(failed)
-    _check_same_size(unfailed + failed, "unfailed+failed models")
-    a = _weights(weights, len(unfailed))
-    b = _weights(failed_weights, len(failed))
+    check_same_size(unfailed + failed, "unfailed+failed models")
+    a = prior_weights(weights, len(unfailed))
+    b = prior_weights(failed_weights, len(failed))
     Zbar = [np.sqrt(b[q]) * design_block(m, order_s, **block_kwargs) for q, m in enumerate(failed)]
     Z = [np.sqrt(a[q]) * design_block(m, order_s, **block_kwargs) for q, m in enumerate(unfailed)]
     H = np.hstack(Zbar + Z)  # eq. 49

@@ -146,7 +146,7 @@ def test_models_share_signals_and_convert_the_elevator_column(models):
 
 
 def test_log_gives_gearing_and_pitch_trim_exactly(models, tmp_path):
-    """On a real iced flight with an elevator bias from t = 3 s: the pitch trim recovered from the log is
+    """On a real iced flight with an elevator bias from t = 3 s: the pitch trim read from the log is
     the linearizer's eta 0.1 trim, and surface = g(cmd + trim) before the fault, + bias after."""
     cfg = dataclasses.replace(CALM, duration_s=6.0, fault_start_s=3.0, fault_bias_deg=1.0)
     fs = fly(cfg, 0.1, 11, True, tmp_path)
