@@ -69,9 +69,9 @@ from numpy.typing import NDArray
 
 from fdi_sim.aircraft.linearize_state import (
     BODY_STATES, CONTROL_INPUTS, ENGINE_STATES, GUST_INPUTS, GUST_PROPS, LAGGED_OUTPUTS, OPTIONAL_DISTURBANCES,
-    SENSOR_OUTPUTS, TrimState, capture_trim, has_propeller, restore_trim, set_state, wrap_rad,
+    SENSOR_OUTPUTS, TrimState, capture_trim, command_props, engine_reader, has_propeller, restore_trim, set_state,
+    wrap_rad,
 )
-from fdi_sim.aircraft.properties import property_map
 from fdi_sim.aircraft.model import Aircraft
 from fdi_sim.aircraft.trim import TrimResult
 from fdi_sim.errors import DesignError
@@ -256,8 +256,7 @@ class _Evaluator:
         self.splits = (nx, nx + nu, nx + nu + ng)
         self.read_x = ac.reader(BODY_STATES)
         self.read_y = ac.reader(SENSOR_OUTPUTS)
-        self.n1_props = [f"propulsion/engine[{i}]/n1" for i in range(ac.n_engines)]
-        self.rpm_props = [f"propulsion/engine[{i}]/propeller-rpm" for i in range(ac.n_engines)]
+        self._engine_state = engine_reader(ac) if dynamic else None
 
     def evaluate(self, v: NDArray[np.float64], dn1_pct: float = 0.0, thr_settle_norm: float = 0.0) -> _Eval:
         """Derivatives and outputs at ``v``; the dynamic engine's N1 offset by ``dn1_pct`` [%]."""
@@ -286,10 +285,6 @@ class _Evaluator:
         # engine: the state at the start of the last tiny step and its rate over that step
         eng_rate = (self._engine_state() - eng_before) / self.s.dt_eval_s
         return _Eval(z=np.concatenate([xr, eng_before, u, gust_b, extra]), f=np.concatenate([xdot, eng_rate, y]))
-
-    def _engine_state(self) -> NDArray[np.float64]:
-        fdm = self.ac.fdm
-        return np.array([np.mean([fdm[p] for p in self.n1_props]), np.mean([fdm[p] for p in self.rpm_props])])
 
 
 def _disturbance_columns(ac: Aircraft, extra_disturbances: Mapping[str, tuple[str, float]] | None
@@ -455,19 +450,15 @@ def pass_jacobians(ac: Aircraft, ts: TrimState, A: NDArray[np.float64], B: NDArr
     fdm = ac.fdm
     P, nr, n = settings.step_passes, _N_RIGID, A.shape[0]
     dyn = ts.n1_pct is not None and n > nr
-    n1_props = [f"propulsion/engine[{i}]/n1" for i in range(ac.n_engines)]
-    rpm_props = [f"propulsion/engine[{i}]/propeller-rpm" for i in range(ac.n_engines)]
     read_lag = ac.reader(LAGGED_OUTPUTS)
-
-    def engine() -> NDArray[np.float64]:
-        return np.array([np.mean([fdm[p] for p in n1_props]), np.mean([fdm[p] for p in rpm_props])])
+    engine = engine_reader(ac) if dyn else None
 
     restore_trim(ac, ts)  # central_difference leaves the aircraft at its last evaluation
-    e_trim = engine() if dyn else np.zeros(0)
+    e_trim = engine() if engine is not None else np.zeros(0)
 
     def derivs() -> NDArray[np.float64]:
         f = np.array([fdm[p] for p in _DERIV_PROPS])
-        if dyn:  # an engine that moved off its trim (steady state of a perturbed point) acts through A
+        if engine is not None:  # an engine that moved off its trim (steady state of a perturbed point) acts through A
             f -= A[:nr, nr:] @ (engine() - e_trim)
         return f
 
@@ -478,9 +469,7 @@ def pass_jacobians(ac: Aircraft, ts: TrimState, A: NDArray[np.float64], B: NDArr
 
     def setter(name: str) -> tuple[list[str], float]:
         if name in CONTROL_INPUTS:
-            props = ([f"fcs/throttle-cmd-norm[{i}]" for i in range(ac.n_engines)] if name == "throttle_cmd_norm"
-                     else [property_map(ac.name)[name]])
-            return props, float(ts.u_cmd[CONTROL_INPUTS.index(name)])
+            return command_props(ac, name), float(ts.u_cmd[CONTROL_INPUTS.index(name)])
         prop = extra[name][0]
         return [prop], float(fdm[prop])
 

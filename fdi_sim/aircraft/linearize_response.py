@@ -16,10 +16,9 @@ from numpy.typing import NDArray
 from fdi_sim.aircraft.linearize import FDSettings, _Evaluator, engine_model
 from fdi_sim.aircraft.linearize_state import (
     BODY_STATES, CONTROL_INPUTS, GUST_INPUTS, GUST_PROPS, OPTIONAL_DISTURBANCES, SENSOR_OUTPUTS, TrimState,
-    restore_trim,
+    command_props, engine_reader, restore_trim,
 )
 from fdi_sim.aircraft.model import Aircraft
-from fdi_sim.aircraft.properties import property_map
 from fdi_sim.errors import DesignError
 
 _PSI = BODY_STATES.index("psi_rad")
@@ -84,8 +83,8 @@ def identify_engine_lag(ac: Aircraft, ts: TrimState, step_norm: float = 0.02) ->
     if ts.n1_pct is None:
         return None
     fdm = ac.fdm
-    n1_props = [f"propulsion/engine[{i}]/n1" for i in range(ac.n_engines)]
-    throttles = [f"fcs/throttle-cmd-norm[{i}]" for i in range(ac.n_engines)]
+    read_engine = engine_reader(ac)
+    throttles = command_props(ac, "throttle_cmd_norm")
     freeze0 = fdm["propulsion/fuel_freeze"]
     fdm["propulsion/fuel_freeze"] = 1
     taus: list[float] = []
@@ -94,10 +93,10 @@ def identify_engine_lag(ac: Aircraft, ts: TrimState, step_norm: float = 0.02) ->
             restore_trim(ac, ts)
             for p in throttles:
                 fdm[p] = ts.u_cmd[CONTROL_INPUTS.index("throttle_cmd_norm")] + sign * step_norm
-            n1 = [float(np.mean([fdm[p] for p in n1_props]))]
+            n1 = [float(read_engine()[0])]
             for _ in range(3):
                 fdm.run()
-                n1.append(float(np.mean([fdm[p] for p in n1_props])))
+                n1.append(float(read_engine()[0]))
             d1, d2 = n1[2] - n1[1], n1[3] - n1[2]
             r = d2 / d1 if d1 * sign > 0 else float("nan")
             if not 0.0 < r < 1.0:
@@ -184,9 +183,7 @@ def simulate_inputs(ac: Aircraft, ts: TrimState, input_names: Sequence[str], du:
         if name in GUST_INPUTS:
             S_g[j, GUST_INPUTS.index(name)] = 1.0
         elif name in CONTROL_INPUTS:
-            props = ([f"fcs/throttle-cmd-norm[{i}]" for i in range(ac.n_engines)] if name == "throttle_cmd_norm"
-                     else [property_map(ac.name)[name]])  # the throttle goes to every engine
-            targets.append((j, [ac.node(p).set_double_value for p in props], float(ts.u_cmd[CONTROL_INPUTS.index(name)])))
+            targets.append((j, [ac.node(p).set_double_value for p in command_props(ac, name)], float(ts.u_cmd[CONTROL_INPUTS.index(name)])))
         else:
             node = ac.node(extras[name][0])
             targets.append((j, [node.set_double_value], node.get_double_value()))

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.aircraft.model import Aircraft
-from fdi_sim.aircraft.properties import COMMAND_SIGNALS
+from fdi_sim.aircraft.properties import COMMAND_SIGNALS, property_map
 from fdi_sim.aircraft.trim import TrimResult
 from fdi_sim.operating_point import OperatingPoint
 
@@ -52,6 +53,24 @@ _ATTITUDE = slice(BODY_STATES.index("phi_rad"), BODY_STATES.index("psi_rad") + 1
 def has_propeller(ac: Aircraft) -> bool:
     """True for propeller aircraft (the DHC-6), whose engines get the dynamic model."""
     return bool(ac.fdm.get_property_manager().hasNode(_PROPELLER_RPM))
+
+
+def command_props(ac: Aircraft, name: str) -> list[str]:
+    """The JSBSim properties the pilot command ``name`` (:data:`CONTROL_INPUTS`) drives; the throttle goes to every engine."""
+    if name == "throttle_cmd_norm":
+        return [f"fcs/throttle-cmd-norm[{i}]" for i in range(ac.n_engines)]
+    return [str(property_map(ac.name)[name])]
+
+
+def engine_reader(ac: Aircraft) -> Callable[[], NDArray[np.float64]]:
+    """A closure reading :data:`ENGINE_STATES`, each the mean over the engines [%, rpm] (propeller aircraft)."""
+    n1 = [ac.node(f"propulsion/engine[{i}]/n1").get_double_value for i in range(ac.n_engines)]
+    rpm = [ac.node(f"propulsion/engine[{i}]/propeller-rpm").get_double_value for i in range(ac.n_engines)]
+
+    def read() -> NDArray[np.float64]:
+        return np.array([np.mean([g() for g in n1]), np.mean([g() for g in rpm])])
+
+    return read
 
 
 def wrap_rad(a_rad: float) -> float:
@@ -104,9 +123,7 @@ class TrimState:
 
 def capture_trim(ac: Aircraft, tr: TrimResult) -> TrimState:
     """Record the trimmed state of ``ac`` (call right after :func:`~fdi_sim.aircraft.trim.trim`)."""
-    n1 = None
-    if has_propeller(ac):
-        n1 = float(np.mean([ac[f"propulsion/engine[{i}]/n1"] for i in range(ac.n_engines)]))
+    n1 = float(engine_reader(ac)()[0]) if has_propeller(ac) else None
     return TrimState(
         op=tr.op, x_body=ac.read(BODY_STATES),
         u_cmd=np.array([tr.elevator_cmd_norm, tr.aileron_cmd_norm, tr.rudder_cmd_norm, tr.throttle_cmd_norm]),

@@ -44,7 +44,9 @@ from fdi_sim.linear.model import LinearModel, StepTerms
 from fdi_sim.linear.modes import identify_modes
 from fdi_sim.linear.schedule import ARRAYS, ModelSchedule, SchedulePoint
 from fdi_sim.linear.transform import discretize
-from fdi_sim.linear.validate import ValidationResult, ValidationSettings, compare, default_doublets, fly_doublets
+from fdi_sim.linear.validate import (
+    DoubletRuns, ValidationResult, ValidationSettings, compare, default_doublets, fly_doublets,
+)
 from fdi_sim.operating_point import OperatingPoint
 from fdi_sim.units import KT_PER_FPS
 
@@ -274,9 +276,10 @@ def _fglin_info(model: LinearModel, fg_eigs: NDArray[np.complex128], dt_s: float
     mt = identify_modes(model.A[np.ix_(idx, idx)], AERO_STATES)
     rel = mt.relative_errors(fg_eigs)
     big = np.array([abs(m.eigenvalue) > 1e-3 for m in mt.modes])
+    labels = [f"{m.name} {m.eigenvalue.real:.4g}" for m in mt.modes]
     out: dict[str, Any] = {
         "max_rel": float(np.max(rel[big])) if big.any() else 0.0,
-        "per_mode": {f"{m.name} {m.eigenvalue.real:.4g}": float(r) for m, r in zip(mt.modes, rel)},
+        "per_mode": dict(zip(labels, rel.tolist())),
         "fglin_eigs": [[float(z.real), float(z.imag)] for z in fg_eigs]}
     if model.step is not None and dt_s is not None and len(idx) == model.n_states:
         from scipy.optimize import linear_sum_assignment
@@ -291,16 +294,9 @@ def _fglin_info(model: LinearModel, fg_eigs: NDArray[np.complex128], dt_s: float
             sim_m = sim[ci[np.argsort(ri)]]  # the simulation's pole next to each of ours, in mode order
             k, _ = match_eigenvalues(sim_m, fg_eigs)
             fg_m = fg_eigs[k]
-            names, starts = [], []
-            i = 0
-            for m in mt.modes:
-                names.append(f"{m.name} {m.eigenvalue.real:.4g}")
-                starts.append(i)
-                i += 2 if m.is_pair else 1
 
             def per_mode(a: NDArray[np.complex128]) -> dict[str, float]:
-                r = np.abs(a - sim_m) / np.maximum(np.abs(sim_m), 1e-3)
-                return {nm: float(np.max(r[s0:s0 + (2 if m.is_pair else 1)])) for nm, s0, m in zip(names, starts, mt.modes)}
+                return dict(zip(labels, mt.per_mode(np.abs(a - sim_m) / np.maximum(np.abs(sim_m), 1e-3)).tolist()))
 
             out["sim"] = {"poles": [[float(z.real), float(z.imag)] for z in sim_m],
                           "ours_vs_sim": per_mode(ours), "fglin_vs_sim": per_mode(fg_m)}
@@ -339,7 +335,7 @@ def _point_info(ac: Aircraft, lp: LinearizedPoint, validation: ValidationSetting
         info["validation"] = {meth: _validation_info(compare(md, runs)) for meth, md in models.items()}
         if "step" in models:
             info["step_states"] = models["step"].n_states
-        if getattr(runs, "engine_lag", None) is not None:  # turboprop: N1 row replaced by the identified lag
+        if runs.engine_lag is not None:  # turboprop: N1 row replaced by the identified lag
             meth = "step" if m.step is not None else "zoh"
             md = models.get(meth) or discretize(m, ac.dt_s, method=meth)
             info["validation_engine_lag"] = {**_validation_info(compare(md, runs, engine_lag=True)), "method": meth}
@@ -349,12 +345,7 @@ def _point_info(ac: Aircraft, lp: LinearizedPoint, validation: ValidationSetting
     return info
 
 
-#: a slope jump (:func:`~fdi_sim.aircraft.linearize.slope_jumps`) at least this large within a
-#: doublet's excursion is reported as a non-smoothness of JSBSim's model there [-]
-NONSMOOTH_JUMP: float = 0.05
-
-
-def nonsmooth(ac: Aircraft, ts: TrimState, runs: Any) -> dict[str, dict[str, float]]:
+def nonsmooth(ac: Aircraft, ts: TrimState, runs: DoubletRuns) -> dict[str, dict[str, float]]:
     """Slope jumps of JSBSim's model within the excursions of the doublet runs.
 
     Probes: every doublet input except the throttle (its non-smoothness is the engine lag) and

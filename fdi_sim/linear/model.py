@@ -73,6 +73,15 @@ class StepTerms:
                          self.n_rigid)
 
 
+#: relative tolerance (to the largest entry) within which step terms' settled pass is the model's A, B
+_SETTLED_RTOL: float = 1e-9
+
+
+def _settled(S: NDArray[np.float64], M: NDArray[np.float64]) -> bool:
+    """``S`` equals ``M`` to :data:`_SETTLED_RTOL` of ``M``'s largest entry (rounding of the axis change)."""
+    return bool(np.max(np.abs(S - M), initial=0.0) <= _SETTLED_RTOL * np.max(np.abs(M), initial=0.0))
+
+
 @dataclass(frozen=True, eq=False)
 class LinearModel:
     """A linear time-invariant model about a trim point, continuous or discrete.
@@ -98,7 +107,9 @@ class LinearModel:
         Free-form provenance (method, aircraft, jsbsim version).
     step : StepTerms or None
         How the derivatives build up within JSBSim's step (continuous models from the
-        linearizer); the input of ``discretize(..., method="step")``.
+        linearizer); the input of ``discretize(..., method="step")``. Terms whose settled pass
+        (``Ax[-1]``, ``Bu[-1]``) is no longer the model's ``A``, ``B`` (a model built by
+        ``dataclasses.replace`` with new matrices) are dropped: the model then has none.
     """
 
     A: NDArray[np.float64]
@@ -149,6 +160,8 @@ class LinearModel:
             missing = [o for o in st.lagged_outputs if o not in self.output_names]
             if missing:
                 raise ValueError(f"step terms: lagged outputs {missing} are not model outputs")
+            if not (_settled(st.Ax[-1], A[:st.n_rigid]) and _settled(st.Bu[-1], B[:st.n_rigid])):
+                object.__setattr__(self, "step", None)  # A or B changed (dataclasses.replace): the terms are stale
 
     @property
     def n_states(self) -> int:

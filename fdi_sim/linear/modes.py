@@ -127,9 +127,12 @@ class ModeTable:
         NDArray
             Shape ``(len(modes),)``, in :attr:`modes` order [-].
         """
-        _, rel = match_eigenvalues(self.eigenvalues(), reference)
+        return self.per_mode(match_eigenvalues(self.eigenvalues(), reference)[1])
+
+    def per_mode(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Per mode, the largest of ``values`` (one per eigenvalue, in :meth:`eigenvalues` order) over its root(s)."""
         starts = np.cumsum([0] + [2 if m.is_pair else 1 for m in self.modes[:-1]])
-        return np.maximum.reduceat(rel, starts) if self.modes else np.zeros(0)
+        return np.maximum.reduceat(values, starts) if self.modes else np.zeros(0)
 
 
 def _is_pair(lam: complex) -> bool:

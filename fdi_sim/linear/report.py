@@ -26,8 +26,9 @@ import numpy as np
 from fdi_sim.linear.schedule import ModelSchedule, SchedulePoint
 from fdi_sim.linear.validate import NRMSE_BAR
 
-#: smallest slope jump listed as a non-smoothness (fdi_sim.linear.linearize.NONSMOOTH_JUMP)
-_JUMP: float = 0.05
+#: a slope jump (:func:`~fdi_sim.aircraft.linearize_response.slope_jumps`, ``info["nonsmooth"]``) at
+#: least this large within a doublet's excursion is listed as a non-smoothness of JSBSim's model there [-]
+NONSMOOTH_JUMP: float = 0.05
 
 
 def _fmt(x: Any, spec: str = ".3g") -> str:
@@ -94,7 +95,7 @@ def bar_method(schedule: ModelSchedule) -> str:
     return "step" if any("step" in p.info.get("validation", {}) for p in schedule.ok_points) else "zoh"
 
 
-def nonsmooth_causes(p: SchedulePoint, min_jump: float = _JUMP) -> list[str]:
+def nonsmooth_causes(p: SchedulePoint, min_jump: float = NONSMOOTH_JUMP) -> list[str]:
     """What JSBSim does at ``p`` that no linear model holds: slope jumps and the engine lag."""
     out = []
     for name, d in sorted(p.info.get("nonsmooth", {}).items(), key=lambda kv: -kv[1]["jump"]):

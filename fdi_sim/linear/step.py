@@ -39,6 +39,7 @@ from scipy.linalg import expm
 
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel, StepTerms
+from fdi_sim.linear.transform import lag_state_name
 
 #: third-order Adams-Bashforth weights of f_k, f_{k-1}, f_{k-2}
 AB3: tuple[float, float, float] = (23.0 / 12.0, -16.0 / 12.0, 5.0 / 12.0)
@@ -149,7 +150,8 @@ def step_model(model: LinearModel, dt_s: float | None = None, tol: float = DELAY
         raise DesignError("step_model needs the continuous model with its step terms, not a discrete one")
     if st is None:
         raise DesignError("this model has no step terms: linearize it with FDSettings(step_passes > 0) "
-                          "(fdi_sim.linear.linearize.linearize does by default)")
+                          "(fdi_sim.linear.linearize.linearize does by default); a model whose A or B was "
+                          "changed afterwards has none (LinearModel.step)")
     h = st.dt_s if dt_s is None else float(dt_s)
     if abs(h - st.dt_s) > 1e-12:
         raise DesignError(f"the step model exists only at the simulation step {st.dt_s:g} s (asked {h:g} s); "
@@ -164,24 +166,25 @@ def step_model(model: LinearModel, dt_s: float | None = None, tol: float = DELAY
     # ---- state layout
     names: list[str] = list(model.state_names)
     x0: list[float] = list(model.x0)
-    mem_x: dict[tuple[int, int], int] = {}
-    for c in range(nr):
-        for j in range(1, dx[c] + 1):
-            mem_x[(c, j)] = len(names)
-            names.append(_lagged(model.state_names[c], j))
-            x0.append(float(model.x0[c]))
-    mem_u: dict[tuple[int, int], int] = {}
-    for c in range(m):
-        for j in range(1, du[c] + 1):
-            mem_u[(c, j)] = len(names)
-            names.append(_lagged(model.input_names[c], j))
-            x0.append(float(model.u0[c]))
+
+    def registers(signals: tuple[str, ...], depth: list[int], trim: NDArray[np.float64]) -> dict[tuple[int, int], int]:
+        """Append a shift register of ``depth[c]`` past values per signal ``c``; ``(c, j) -> state index``."""
+        mem = {}
+        for c, d in enumerate(depth):
+            for j in range(1, d + 1):
+                mem[(c, j)] = len(names)
+                names.append(_lagged(signals[c], j))
+                x0.append(float(trim[c]))
+        return mem
+
+    mem_x = registers(model.state_names, dx, model.x0)
+    mem_u = registers(model.input_names, du, model.u0)
     i_f1 = len(names)
     names += [_rate_lagged(model.state_names[c], 1) for c in range(nr)]
     names += [_rate_lagged(model.state_names[c], 2) for c in range(nr)]
     x0 += [0.0] * (2 * nr)
     i_z = len(names)
-    names += [_lag_output_name(model.output_names[i]) for i in lag]
+    names += [lag_state_name(model.output_names[i]) for i in lag]
     x0 += [float(model.y0[i]) for i in lag]
     N = len(names)
     # ---- the engine of this pass: e_k = Pe e_{k-1} + Ex x_k + Eu u_k, as rows over [s; u]
@@ -205,16 +208,12 @@ def step_model(model: LinearModel, dt_s: float | None = None, tol: float = DELAY
     Ad[:nr, i_f1:i_f1 + nr] += h * AB3[1] * np.eye(nr)
     Ad[:nr, i_f1 + nr:i_f1 + 2 * nr] += h * AB3[2] * np.eye(nr)
     Ad[nr:n], Bd[nr:n] = Es, Eu_                       # the engine state carries e_k to the next step
-    for (c, j), k in mem_x.items():                    # shift registers: x_{k-j+1} -> x_{k-j}
-        if j == 1:
-            Ad[k, c] = 1.0
-        else:
-            Ad[k, mem_x[(c, j - 1)]] = 1.0
-    for (c, j), k in mem_u.items():
-        if j == 1:
-            Bd[k, c] = 1.0
-        else:
-            Ad[k, mem_u[(c, j - 1)]] = 1.0
+    for mem, first in ((mem_x, Ad), (mem_u, Bd)):      # shift registers: x_{k-j+1} -> x_{k-j}, u likewise
+        for (c, j), k in mem.items():
+            if j == 1:
+                first[k, c] = 1.0
+            else:
+                Ad[k, mem[(c, j - 1)]] = 1.0
     Ad[i_f1:i_f1 + nr], Bd[i_f1:i_f1 + nr] = Fs, Fu     # f_{k-1} <- f_k
     Ad[i_f1 + nr:i_f1 + 2 * nr, i_f1:i_f1 + nr] = np.eye(nr)
     # state at this pass [x_k; e_k] as rows over [s; u]
@@ -245,12 +244,6 @@ def step_model(model: LinearModel, dt_s: float | None = None, tol: float = DELAY
     )
 
 
-def _lag_output_name(output: str) -> str:
-    """``nz_g`` -> ``nz_lag_g`` (the name :func:`fdi_sim.linear.transform.discretize` uses)."""
-    stem, unit = _split(output)
-    return f"{stem}_lag_{unit}"
-
-
 def equivalent_poles(model_d: LinearModel, min_abs_z: float = 0.3) -> NDArray[np.complex128]:
     """Continuous-time equivalents ``ln(z) / dt`` of the poles of a discrete model [1/s].
 
@@ -266,7 +259,7 @@ def equivalent_poles(model_d: LinearModel, min_abs_z: float = 0.3) -> NDArray[np
 
 
 def strip(model: LinearModel) -> LinearModel:
-    """The model without step terms (after operations that would make them wrong)."""
+    """The model without step terms (a change of ``A`` or ``B`` drops them by itself: :class:`LinearModel`)."""
     return model if model.step is None else replace(model, step=None)
 
 

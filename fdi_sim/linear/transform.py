@@ -87,15 +87,15 @@ def discretize(model: LinearModel, dt_s: float = DEFAULT_DT_S, method: str = "zo
         C[i] = 0.0
         C[i, n + j] = 1.0
         D[i] = 0.0
-    names = d.state_names + tuple(_lag_name(d.output_names[i]) for i in lag)
+    names = d.state_names + tuple(lag_state_name(d.output_names[i]) for i in lag)
     return replace(d, A=A, B=B, C=C, D=D, state_names=names, x0=np.concatenate([d.x0, d.y0[lag]]),
                    meta={**d.meta, "lag_states": list(names[n:])})
 
 
-def _lag_name(output: str) -> str:
-    """``nz_g`` -> ``nz_lag_g``: the unit stays last."""
+def lag_state_name(output: str) -> str:
+    """``nz_g`` -> ``nz_lag_g``: the state holding an output one step late, unit last (also the step model's)."""
     stem, _, unit = output.rpartition("_")
-    return f"{stem}_lag_{unit}"
+    return f"{stem}_lag_{unit}" if stem else f"{output}_lag"
 
 
 def select(model: LinearModel, outputs: Sequence[str] | None = None, inputs: Sequence[str] | None = None) -> LinearModel:

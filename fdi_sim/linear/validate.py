@@ -140,35 +140,33 @@ def simulate_linear(model: LinearModel, du: NDArray[np.float64], engine_lag: Eng
     du = np.atleast_2d(np.asarray(du, dtype=float))
     if du.shape[1] != model.n_inputs:
         raise DesignError(f"du has {du.shape[1]} columns, the model has {model.n_inputs} inputs")
-    x = np.zeros(model.n_states)
-    xs = np.empty((du.shape[0], model.n_states))
-    A, B = model.A, model.B
-    if engine_lag is None:
-        return _simulate_batch(model, du[None])[0]
-    i, j, K = _lag_row(model, engine_lag)
-    r_up, r_down = math.exp(-model.dt_s / engine_lag.tau_up_s), math.exp(-model.dt_s / engine_lag.tau_down_s)
-    for k in range(du.shape[0]):
-        xs[k] = x
-        target = K * du[k, j]
-        z = x[i]
-        x = A @ x + B @ du[k]
-        # FGTurboProp ExpSeek: N1 <- T + (N1 - T) exp(-dt / tau), tau by the direction of travel
-        x[i] = target + (z - target) * (r_up if z < target else r_down)
-    return xs @ model.C.T + du @ model.D.T
+    return _simulate_batch(model, du[None], engine_lag)[0]
 
 
-def _simulate_batch(model: LinearModel, du: NDArray[np.float64]) -> NDArray[np.float64]:
-    """:func:`simulate_linear` of several equally long input sequences at once, ``du`` (R, N, m) -> (R, N, p)."""
+def _simulate_batch(model: LinearModel, du: NDArray[np.float64], engine_lag: EngineLag | None = None
+                    ) -> NDArray[np.float64]:
+    """:func:`simulate_linear` of several equally long input sequences at once, ``du`` (R, N, m) -> (R, N, p).
+
+    All runs are the columns of one state matrix, so each step is one matrix product.
+    """
     R, N, _ = du.shape
-    bu = np.einsum("rkm,nm->knr", du, model.B)  # B u_k for every run, (N, n, R)
+    bu = model.B @ du.transpose(1, 2, 0)  # B u_k of every run, (N, n, R)
     A = model.A
-    x = np.zeros((model.n_states, R))
     xs = np.empty((N, model.n_states, R))
-    for k in range(N):  # x_{k+1} = A x_k + B u_k, all runs as the columns of one matrix
-        xs[k] = x
-        x = A @ x
+    xs[:1] = 0.0
+    if engine_lag is not None:
+        i, j, K = _lag_row(model, engine_lag)
+        target = K * du[:, :, j].T  # (N, R)
+        r_up, r_down = math.exp(-model.dt_s / engine_lag.tau_up_s), math.exp(-model.dt_s / engine_lag.tau_down_s)
+    for k in range(N - 1):  # x_{k+1} = A x_k + B u_k
+        x = xs[k + 1]
+        np.matmul(A, xs[k], out=x)
         x += bu[k]
-    return np.einsum("knr,pn->rkp", xs, model.C) + np.einsum("rkm,pm->rkp", du, model.D)
+        if engine_lag is not None:
+            # FGTurboProp ExpSeek: N1 <- T + (N1 - T) exp(-dt / tau), tau by the direction of travel
+            z, t = xs[k, i], target[k]
+            x[i] = t + (z - t) * np.where(z < t, r_up, r_down)
+    return (model.C @ xs).transpose(2, 0, 1) + du @ model.D.T
 
 
 def _lag_row(model: LinearModel, lag: EngineLag) -> tuple[int, int, float]:
@@ -325,11 +323,7 @@ def compare(model_d: LinearModel, runs: DoubletRuns, engine_lag: bool = False) -
         if name not in model_d.input_names:
             raise DesignError(f"doublet input {name!r} is not a model input ({', '.join(model_d.input_names)})")
         U[r, :, model_d.input_names.index(name)] = u
-    if lag is None:
-        y_lin = _simulate_batch(model_d, U)
-    else:
-        y_lin = np.array([simulate_linear(model_d, Ur, lag) for Ur in U])
-    return ValidationResult(runs=runs, y_lin=y_lin, engine_lag=lag)
+    return ValidationResult(runs=runs, y_lin=_simulate_batch(model_d, U, lag), engine_lag=lag)
 
 
 def default_doublets(model: LinearModel, settings: ValidationSettings) -> tuple[DoubletSpec, ...]:

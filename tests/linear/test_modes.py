@@ -78,10 +78,22 @@ def test_frequency_and_damping_match_python_control() -> None:
     np.testing.assert_allclose(np.sort_complex(mt.eigenvalues()), np.sort_complex(np.linalg.eigvals(A)), atol=1e-9)
 
 
-def test_participation_columns_sum_to_one() -> None:
-    _, P = participation(synthetic_aircraft(np.random.default_rng(13)))
+def test_participation_does_not_depend_on_units_or_state_order() -> None:
+    """The module's reason for participation factors over mode shapes: a change of units (diagonal
+    similarity) leaves them unchanged, a reordering of the states permutes their rows."""
+    rng = np.random.default_rng(13)
+    A = synthetic_aircraft(rng)
+    lam, P = participation(A)
+    S = np.diag(10.0 ** rng.uniform(-3, 3, size=10))
+    perm = rng.permutation(10)
+    for A2, rows in ((S @ A @ np.linalg.inv(S), np.arange(10)), (A[np.ix_(perm, perm)], perm)):
+        lam2, P2 = participation(A2)
+        k = [int(np.argmin(np.abs(lam2 - z))) for z in lam]  # the same mode in the other coordinates
+        np.testing.assert_allclose(P2[:, k], P[rows], atol=1e-8)
     np.testing.assert_allclose(P.sum(axis=0), 1.0)
-    assert np.all(P >= 0)
+    # a triangular A: each mode belongs to its own state alone
+    _, Pt = participation(np.triu(rng.normal(size=(4, 4))) + np.diag([-1.0, -2.0, -3.0, -4.0]))
+    np.testing.assert_allclose(Pt, np.eye(4), atol=1e-12)
 
 
 def test_match_eigenvalues_is_the_optimal_pairing() -> None:

@@ -5,6 +5,8 @@ engine inside the pass and the lagged accelerometers) and checks the realization
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.linalg import expm
@@ -159,6 +161,19 @@ def test_select_keeps_the_step_terms_consistent() -> None:
     y_sub = simulate_linear(step_model(sub), U)
     np.testing.assert_allclose(y_sub, y_full[:, [model.output_names.index("nz_g"), model.output_names.index("q_radps")]],
                                rtol=1e-10, atol=1e-12)
+
+
+def test_step_terms_do_not_survive_a_change_of_a_or_b() -> None:
+    """The step terms describe the A and B they were measured with (their last pass is A's, B's rigid
+    rows): a model built from it by dataclasses.replace with other matrices has none, so the step model
+    of the old matrices cannot be built for the new ones."""
+    model = _model(np.random.default_rng(8), 3)
+    assert replace(model, meta={}).step is model.step  # nothing changed: the terms stay
+    assert replace(model, A=model.A * (1 + 1e-13)).step is model.step  # rounding (the body -> aero transform)
+    for changed in (replace(model, A=model.A + 0.1 * np.eye(model.n_states)), replace(model, B=2.0 * model.B)):
+        assert changed.step is None
+        with pytest.raises(DesignError, match="no step terms"):
+            discretize(changed, H, method="step")
 
 
 def test_bad_input() -> None:
