@@ -1,8 +1,9 @@
 """The one contract for everything time-stepped (pilot, faults, sensors, detectors, decisions).
 
-``reset(..., rng)`` prepares a run; ``step(t_s, ...)`` advances it by one step and returns a
-frozen dataclass. Argument order is fixed: time first, then the command ``u``, then the
-measurement ``y``. Randomness only through the ``numpy.random.Generator`` given to ``reset``.
+``reset(..., rng)`` prepares a run; ``step(t_s, ...)`` advances it by one step and returns an
+immutable result (a frozen dataclass, or a named tuple where one is built every step). Argument
+order is fixed: time first, then the command ``u``, then the measurement ``y``. Randomness
+only through the ``numpy.random.Generator`` given to ``reset``.
 """
 from __future__ import annotations
 
@@ -20,5 +21,5 @@ class TimeStepped(Protocol):
         ...
 
     def step(self, t_s: float, *args: Any) -> Any:
-        """Advance to time ``t_s`` [s] and return a frozen result."""
+        """Advance to time ``t_s`` [s] and return an immutable result."""
         ...

@@ -35,6 +35,11 @@ _ACC_W = np.array([1.0, 1.0, 1.0, 100.0, 100.0, 100.0])
 #: a trim is accepted when max |weighted acceleration| is below this
 TRIM_TOL = 0.05
 DHC6_BETA_RAD = -0.3 * RAD_PER_DEG
+# running trim: Newton iterations; largest move per iteration [alpha rad, phi rad, throttle, pitch
+# trim, aileron, rudder] (2 deg, 0.1); a clipped step moving z by less than _Z_STALL ends the search
+_MAX_ITER = 30
+_MAX_STEP = np.array([0.035, 0.035, 0.1, 0.1, 0.1, 0.1])
+_Z_STALL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -131,7 +136,7 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
             raise TrimError(ac.name, op.label(), jsb_error)
         fdm.get_propulsion().get_steady_state()
         res = float(np.max(np.abs(_tiny_step_accelerations(ac))))
-        result = _result(ac, op, res, "jsbsim", psidot=_turn_rate(ac, op))
+        result = _result(ac, op, res, "jsbsim", psidot=_turn_rate_radps(op.phi_deg, ac["velocities/vt-fps"]))
     else:
         fdm.get_propulsion().get_steady_state()  # avoid the N1 -> idle reset on the first step
         result = trim_running(ac, op, jsb_error)
@@ -178,9 +183,9 @@ def _set_ic(ac: Aircraft, op: OperatingPoint) -> None:
     fdm["ic/beta-deg"] = 0.0
 
 
-def _turn_rate(ac: Aircraft, op: OperatingPoint) -> float:
-    # coordinated turn: psidot = g tan(phi) / V  [rad/s]
-    return G0_FPS2 * math.tan(op.phi_deg * RAD_PER_DEG) / max(ac["velocities/vt-fps"], 1.0)
+def _turn_rate_radps(phi_deg: float, vt_fps: float) -> float:
+    """Coordinated turn: psidot = g tan(phi) / V [rad/s]."""
+    return G0_FPS2 * math.tan(phi_deg * RAD_PER_DEG) / max(vt_fps, 1.0)
 
 
 def _tiny_step_accelerations(ac: Aircraft) -> NDArray[np.float64]:
@@ -242,7 +247,7 @@ def trim_running(ac: Aircraft, op: OperatingPoint, jsb_error: str = "") -> TrimR
         vt_fps = fdm["ic/vt-fps"]
     else:
         vt_fps = op.speed_fps
-    psidot = G0_FPS2 * math.tan(op.phi_deg * RAD_PER_DEG) / vt_fps
+    psidot = _turn_rate_radps(op.phi_deg, vt_fps)
     st = {
         "h_ft": op.h_ft, "vt_fps": vt_fps, "psi_rad": op.psi_deg * RAD_PER_DEG,
         "gamma_rad": op.gamma_deg * RAD_PER_DEG, "beta_rad": DHC6_BETA_RAD, "psidot_radps": psidot,
@@ -258,7 +263,7 @@ def trim_running(ac: Aircraft, op: OperatingPoint, jsb_error: str = "") -> TrimR
     lo = np.array([-0.25, -1.2, 0.0, -1.0, -1.0, -1.0])
     hi = np.array([0.35, 1.2, 1.0, 1.0, 1.0, 1.0])
     best = (np.inf, z.copy())
-    for _ in range(30):
+    for _ in range(_MAX_ITER):
         r = _running_residual(ac, st, z)
         nr = float(np.max(np.abs(r)))
         if nr < best[0]:
@@ -272,8 +277,11 @@ def trim_running(ac: Aircraft, op: OperatingPoint, jsb_error: str = "") -> TrimR
             J[:, j] = (_running_residual(ac, st, z + dz) - _running_residual(ac, st, z - dz)) / (2 * h[j])
         step, *_ = np.linalg.lstsq(J, -r, rcond=None)
         # damped step: never move alpha/phi by more than 2 deg, controls by 0.1 per iteration
-        scale = min(1.0, float(np.min(np.array([0.035, 0.035, 0.1, 0.1, 0.1, 0.1]) / (np.abs(step) + 1e-12))))
-        z = np.clip(z + scale * step, lo, hi)
+        scale = min(1.0, float(np.min(_MAX_STEP / (np.abs(step) + 1e-12))))
+        z_new = np.clip(z + scale * step, lo, hi)
+        if float(np.max(np.abs(z_new - z))) < _Z_STALL:
+            break  # a fixed point (typically a control clipped at its stop): later iterations repeat this residual
+        z = z_new
     res, z = best
     _init_state(ac, st, z)
     return _result(ac, op, res, "running", psidot=psidot)

@@ -58,7 +58,8 @@ def test_untrimmable_point_raises_with_reason() -> None:
     with pytest.raises(TrimError) as ei:
         trim(ac, OperatingPoint("DHC6", 5000.0, vc_kts=150.0))
     assert "DHC6" in str(ei.value) and "150" in str(ei.value)
-    assert ei.value.reason
+    # the Newton search stops at its fixed point (throttle clipped at full) and names the cause
+    assert "throttle_cmd_norm = 1.000 at its limit" in ei.value.reason
 
 
 def test_unknown_aircraft() -> None:
