@@ -21,13 +21,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from fdi_sim.sim import run
 
     sc = load(args.scenario)
-    changes = {}
     if args.seed is not None:
-        changes["seed"] = args.seed
+        sc = sc.replace(seed=args.seed)
     if args.duration is not None:
-        changes["duration_s"] = args.duration
-    if changes:
-        sc = sc.replace(**changes)
+        sc, dropped = sc.shortened(args.duration)
+        if dropped:
+            print(f"note: --duration {args.duration:g} s drops {dropped} maneuver/fault entries that start later",
+                  file=sys.stderr)
     res = run(sc, args.out, log_path=args.log, progress=None if not args.quiet else False)
     print(res.summary.format())
     print(f"log        {res.log_path}")

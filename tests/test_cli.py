@@ -93,3 +93,12 @@ def test_sigkill_halfway_then_repair(tmp_path: Path, f16_text: str) -> None:
     assert len(t) == round(t[-1] * 120) + 1
     statuses = [e.payload["status"] for e in rep.topics["/sim/status"].events]
     assert statuses == ["running"]  # killed: no end record
+
+
+def test_run_shortened_drops_later_entries(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The README's `fdi-sim run scenarios/dhc6_cruise_doublets.toml --duration S` works for any S:
+    maneuvers and faults starting after S are dropped with a note, not refused."""
+    scn = Path(__file__).resolve().parents[1] / "scenarios" / "dhc6_cruise_doublets.toml"
+    assert main(["run", str(scn), "--out", str(tmp_path), "--duration", "20", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "drops 3 maneuver/fault entries" in err  # the doublets at 20, 35 s and the 3211 at 45 s

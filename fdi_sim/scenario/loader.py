@@ -80,6 +80,18 @@ class Scenario:
         data.update(changes)
         return from_dict(data, self.source)
 
+    def shortened(self, duration_s: float) -> tuple["Scenario", int]:
+        """A copy flown for ``duration_s`` [s] without the maneuvers and faults that would start after it.
+
+        Returns the copy and how many entries were dropped (a plain ``replace(duration_s=...)``
+        refuses them, as a scenario file must).
+        """
+        m = self.model
+        maneuvers = [e for e in m.maneuvers if e.get("t_start_s", 0.0) < duration_s]
+        faults = [e for e in m.faults if e.get("t_start_s", 0.0) < duration_s]
+        dropped = len(m.maneuvers) - len(maneuvers) + len(m.faults) - len(faults)
+        return self.replace(duration_s=duration_s, maneuvers=maneuvers, faults=faults), dropped
+
     def to_json(self) -> str:
         """Canonical JSON of the validated scenario (stored in every log)."""
         return self.model.model_dump_json()
