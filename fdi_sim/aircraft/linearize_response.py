@@ -222,6 +222,9 @@ def simulate_inputs(ac: Aircraft, ts: TrimState, input_names: Sequence[str], du:
 #: probes of :func:`slope_jumps` that are states, not inputs
 STATE_PROBES: tuple[str, ...] = ("alpha_rad", "beta_rad", "p_radps", "q_radps", "r_radps")
 
+#: the gas-generator probe of :func:`slope_jumps` (turboprops: power and propeller torque as N1 moves)
+N1_PROBE: str = "n1_pct"
+
 
 def slope_jumps(ac: Aircraft, ts: TrimState, probes: Mapping[str, float],
                 settings: FDSettings | None = None) -> dict[str, float]:
@@ -242,7 +245,11 @@ def slope_jumps(ac: Aircraft, ts: TrimState, probes: Mapping[str, float],
         The trim.
     probes : mapping
         Input name (:data:`CONTROL_INPUTS`, :data:`GUST_INPUTS`) or state name
-        (:data:`STATE_PROBES`) -> excursion ``a`` [units of the name]; non-positive ones are skipped.
+        (:data:`STATE_PROBES`, and :data:`N1_PROBE` on turboprops) -> excursion ``a`` [units of
+        the name]; non-positive ones are skipped. The N1 probe moves the gas generator with the
+        rest held and is judged on the accelerations and the propeller's speed rate (where the
+        engine's power reaches the airframe); N1's own rate is left out, its asymmetric lag being
+        :func:`identify_engine_lag`'s.
     settings : FDSettings, optional
         Evaluation settings (``n_settle``, ``dt_eval_s``, ``engine``).
 
@@ -261,10 +268,16 @@ def slope_jumps(ac: Aircraft, ts: TrimState, probes: Mapping[str, float],
     v0 = np.concatenate([ts.x_body, ts.u_cmd, np.zeros(len(GUST_INPUTS))])
     u, v, w = ts.x_body[:3]
     dirs: dict[str, NDArray[np.float64]] = {}
+    n1_a = 0.0
     for name, a in probes.items():
         if not a > 0:
             continue
         e = np.zeros(v0.size)
+        if name == N1_PROBE:
+            if not ev.dynamic or ts.n1_pct is None:
+                raise DesignError(f"slope_jumps: probe {N1_PROBE!r} needs a turboprop with its dynamic engine model")
+            n1_a = float(a)
+            continue
         if name in CONTROL_INPUTS:
             e[len(BODY_STATES) + CONTROL_INPUTS.index(name)] = 1.0
         elif name in GUST_INPUTS:
@@ -278,10 +291,15 @@ def slope_jumps(ac: Aircraft, ts: TrimState, probes: Mapping[str, float],
         else:
             raise DesignError(f"slope_jumps: unknown probe {name!r}; use a control, a gust or one of {STATE_PROBES}")
         dirs[name] = e * a
-    rows = slice(0, 6)  # u, v, w, p, q, r derivatives
+    # u, v, w, p, q, r derivatives; with the dynamic engine also the propeller speed rate (the
+    # row after N1's own rate), used for the N1 probe only
+    rows = list(range(6)) + ([len(BODY_STATES) + 1] if ev.dynamic else [])
+    weights = np.array([1.0, 1.0, 1.0, 100.0, 100.0, 100.0] + ([1.0] if ev.dynamic else []))
     try:
         f0 = ev.evaluate(v0).f[rows]
         ends = {n: (ev.evaluate(v0 + d).f[rows], ev.evaluate(v0 - d).f[rows]) for n, d in dirs.items()}
+        if n1_a > 0:
+            ends[N1_PROBE] = (ev.evaluate(v0, dn1_pct=n1_a).f[rows], ev.evaluate(v0, dn1_pct=-n1_a).f[rows])
     finally:
         for prop in GUST_PROPS:
             ac.fdm[prop] = 0.0
@@ -289,10 +307,13 @@ def slope_jumps(ac: Aircraft, ts: TrimState, probes: Mapping[str, float],
     if not ends:
         return {}
     change = np.array([np.abs(fp - fm) / 2 for fp, fm in ends.values()])  # |s| a per probe and row
+    if ev.dynamic:  # the propeller row belongs to the N1 probe alone
+        change[[n != N1_PROBE for n in ends], -1] = 0.0
     # rows that matter for a probe: 20 % of what any probe does there, and 10 % of the probe's own
-    # largest effect with the rows weighted as in the trim (ft/s^2; rad/s^2 x 100)
-    weighted = change * np.array([1.0, 1.0, 1.0, 100.0, 100.0, 100.0])
+    # largest effect with the rows weighted as in the trim (ft/s^2; rad/s^2 x 100; rpm/s)
+    weighted = change * weights
     big = (change >= 0.2 * np.max(change, axis=0)) & (weighted >= 0.1 * np.max(weighted, axis=1, keepdims=True))
+    big &= change > 0
     out = {}
     for k, (name, (fp, fm)) in enumerate(ends.items()):
         a = float(probes[name])

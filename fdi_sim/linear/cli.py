@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         from fdi_sim.linear.grid import resolve_grid
         from fdi_sim.linear.linearize import linearize_grid
-        from fdi_sim.linear.report import format_report, worst_validation
+        from fdi_sim.linear.report import BAR, bar_entry, bar_method, format_report, method_label, worst_validation
 
         grid = resolve_grid(args.grid, name)
         if args.duration is not None:
@@ -65,9 +65,8 @@ def run(args: argparse.Namespace) -> int:
         def progress(i: int, total: int, pt: Any) -> None:
             if args.quiet:
                 return
-            val = pt.info.get("validation", {})
-            v = val.get("step") or val.get("zoh")
-            extra = f"worst {v['worst_output']} {v['worst']:.1%}" if v else pt.reason
+            v = bar_entry(pt, "step") or bar_entry(pt, "zoh") if pt.status == "ok" else None
+            extra = f"bar: worst {v['worst_output']} {v['worst']:.1%}" if v else pt.reason
             print(f"  [{i:3d}/{total}] {pt.op.label():42s} {pt.status:12s} {extra}", flush=True)
 
         t0 = time.perf_counter()
@@ -92,6 +91,10 @@ def run(args: argparse.Namespace) -> int:
     for meth in schedule.meta.get("validation", {}).get("methods", []):
         w = worst_validation(schedule, meth)
         if w:
-            print(f"validation ({meth}): worst {w[1]} {w[2]:.1%} at {w[0]}")
+            print(f"validation ({meth}, configured doublets): worst {w[1]} {w[2]:.1%} at {w[0]}")
+    w = worst_validation(schedule, BAR)
+    if w:
+        n_pass = sum(bool((bar_entry(p, bar_method(schedule)) or {}).get("passed")) for p in schedule.ok_points)
+        print(f"bar ({method_label(BAR, schedule)}): {n_pass}/{ok} points below 5 %; worst {w[1]} {w[2]:.1%} at {w[0]}")
     print(f"schedule   {path}\nreport     {report}" + (f"\npole map   {fig}" if fig else ""))
     return 0

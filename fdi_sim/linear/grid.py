@@ -270,10 +270,30 @@ def parse_grid_spec(spec: str, aircraft: str) -> GridSpec:
     return grid_from_dict(data, f"grid spec {spec!r}", aircraft)
 
 
+def named_grids(aircraft: str) -> dict[str, Path]:
+    """The aircraft's shipped grids: ``default`` (``grid.toml``) and ``<name>`` (``grid_<name>.toml``)."""
+    folder = AIRCRAFT_DATA / aircraft
+    out = {"default": default_grid_path(aircraft)} if default_grid_path(aircraft).exists() else {}
+    out.update({f.stem.removeprefix("grid_"): f for f in sorted(folder.glob("grid_*.toml"))})
+    return out
+
+
 def resolve_grid(text: str | None, aircraft: str) -> GridSpec:
-    """A grid file path, a spec string, or None for the aircraft's default grid."""
+    """A grid file path, a spec string, a shipped grid's name (``iced``), or None for the default grid.
+
+    Raises
+    ------
+    DesignError
+        Neither a spec, nor an existing file, nor a shipped grid name (the message lists them).
+    """
     if text is None:
         return load_grid(default_grid_path(aircraft), aircraft)
     if "=" in text:
         return parse_grid_spec(text, aircraft)
+    named = named_grids(aircraft)
+    if text in named and not Path(text).exists():
+        return load_grid(named[text], aircraft)
+    if not Path(text).exists() and not text.endswith(".toml"):
+        raise DesignError(f"grid {text!r} is not a file, a spec like 'h_ft=5000,10000;vt_kts=350:430:20' or a "
+                          f"grid shipped for {aircraft} ({', '.join(named) or 'none'})")
     return load_grid(text, aircraft)

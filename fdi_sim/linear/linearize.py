@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 import fdi_sim
 from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, PassJacobians, central_difference
-from fdi_sim.aircraft.linearize_response import STATE_PROBES, slope_jumps
+from fdi_sim.aircraft.linearize_response import N1_PROBE, STATE_PROBES, slope_jumps
 from fdi_sim.aircraft.linearize_fglin import JsbsimLinearization, fglinearization
 from fdi_sim.aircraft.linearize_state import LAGGED_OUTPUTS, TrimState, capture_trim, has_propeller
 from fdi_sim.aircraft.model import AIRCRAFT, Aircraft
@@ -45,7 +45,8 @@ from fdi_sim.linear.modes import identify_modes
 from fdi_sim.linear.schedule import ARRAYS, ModelSchedule, SchedulePoint
 from fdi_sim.linear.transform import discretize
 from fdi_sim.linear.validate import (
-    DoubletRuns, ValidationResult, ValidationSettings, compare, default_doublets, fly_doublets,
+    ENGINE_LAG_KEY, NONSMOOTH_JUMP, DoubletRuns, ValidationResult, ValidationSettings, lag_row, compare,
+    default_doublets, fly_doublets,
 )
 from fdi_sim.operating_point import OperatingPoint
 from fdi_sim.units import KT_PER_FPS
@@ -338,34 +339,202 @@ def _point_info(ac: Aircraft, lp: LinearizedPoint, validation: ValidationSetting
         if runs.engine_lag is not None:  # turboprop: N1 row replaced by the identified lag
             meth = "step" if m.step is not None else "zoh"
             md = models.get(meth) or discretize(m, ac.dt_s, method=meth)
-            info["validation_engine_lag"] = {**_validation_info(compare(md, runs, engine_lag=True)), "method": meth}
+            info[ENGINE_LAG_KEY] = {**_validation_info(compare(md, runs, engine_lag=True)), "method": meth}
             info["engine_lag"] = {"tau_up_s": runs.engine_lag.tau_up_s, "tau_down_s": runs.engine_lag.tau_down_s}
-        info["nonsmooth"] = nonsmooth(ac, lp.trim_state, runs)
+        info["nonsmooth"] = nonsmooth(ac, lp.trim_state, runs, m)
+        info["linear_range"] = _linear_range_info(ac, lp, runs, info, models)
         info["timing_s"]["validate"] = time.perf_counter() - t0
     return info
 
 
-def nonsmooth(ac: Aircraft, ts: TrimState, runs: DoubletRuns) -> dict[str, dict[str, float]]:
+def _linear_range_info(ac: Aircraft, lp: LinearizedPoint, runs: DoubletRuns, info: dict[str, Any],
+                       models: dict[str, LinearModel]) -> dict[str, Any]:
+    """The validation again with each doublet inside the smooth range of JSBSim's tables.
+
+    ``info["linear_range"]``: ``doublets`` (input -> amplitude flown), ``reduced`` (input ->
+    ``{"factor", "by", "radius", "jump"}`` for every doublet made smaller), ``no_smooth_range``
+    (probes with a kink at the trim itself), ``nonsmooth`` of the runs flown, and ``validation``
+    / ``validation_engine_lag`` as in the point's info. Where no doublet is reduced the entries
+    are those of the configured amplitudes.
+    """
+    assert lp.trim_state is not None and lp.model is not None
+    lr = linear_range_runs(ac, lp.trim_state, runs, info["nonsmooth"], lp.model)
+    out: dict[str, Any] = {"doublets": {d.input_name: d.amplitude for d in lr.runs.doublets},
+                           "reduced": lr.reduced, "no_smooth_range": lr.no_smooth_range}
+    if not lr.reduced:
+        out.update(nonsmooth=info["nonsmooth"], validation=info["validation"])
+        if ENGINE_LAG_KEY in info:
+            out[ENGINE_LAG_KEY] = info[ENGINE_LAG_KEY]
+        return out
+    out["nonsmooth"] = nonsmooth(ac, lp.trim_state, lr.runs, lp.model)
+    out["validation"] = {meth: _validation_info(compare(md, lr.runs)) for meth, md in models.items()}
+    if ENGINE_LAG_KEY in info:
+        meth = info[ENGINE_LAG_KEY]["method"]
+        md = models.get(meth) or discretize(lp.model, ac.dt_s, method=meth)
+        out[ENGINE_LAG_KEY] = {**_validation_info(compare(md, lr.runs, engine_lag=True)), "method": meth}
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class LinearRangeRuns:
+    """Doublet runs kept inside the smooth range of JSBSim's model (:func:`linear_range_runs`).
+
+    Attributes
+    ----------
+    runs : DoubletRuns
+        All runs: those of the configured amplitudes, with the reduced ones flown again.
+    reduced : dict
+        Input -> ``{"factor": f, "amplitude": a, "by": probe, "radius": r, "jump": j}``: the
+        doublet was flown at ``f`` times its amplitude because ``probe`` (an input or a state) has
+        a slope jump ``j`` within the configured excursion and none above the bar within ``r``.
+    no_smooth_range : dict
+        Probe -> jump for kinks still found after halving the excursion ``max_halvings`` times
+        (a kink at the trim itself): the doublets that cross it are left as configured.
+    """
+
+    runs: DoubletRuns
+    reduced: dict[str, dict[str, Any]]
+    no_smooth_range: dict[str, float]
+
+
+def _run_excursions(runs: DoubletRuns, model: LinearModel | None = None) -> list[dict[str, float]]:
+    """Per run, how far it moves each probe: its own input (the amplitude), the states and N1 [units of the probe]."""
+    from fdi_sim.aircraft.linearize_state import CONTROL_INPUTS, GUST_INPUTS
+
+    out = []
+    n1 = n1_excursions(runs, model)
+    for r, d in enumerate(runs.doublets):
+        exc = {d.input_name: abs(d.amplitude)} if d.input_name in CONTROL_INPUTS + GUST_INPUTS else {}
+        for name in STATE_PROBES:
+            if name in runs.output_names:
+                exc[name] = float(np.max(np.abs(runs.dy[r, :, runs.output_names.index(name)])))
+        if n1[r] > 0:
+            exc[N1_PROBE] = float(n1[r])
+        out.append(exc)
+    return out
+
+
+def linear_range_runs(ac: Aircraft, ts: TrimState, runs: DoubletRuns, jumps: dict[str, dict[str, float]],
+                      model: LinearModel | None = None, jump_bar: float = NONSMOOTH_JUMP,
+                      max_halvings: int = 6) -> LinearRangeRuns:
+    """Fly again, smaller, every doublet that carries JSBSim across a kink of its tables.
+
+    A linear model is the tangent of a smooth function; across a table breakpoint or a kink (the
+    DHC-6 left aileron's unequal travel at zero deflection, a breakpoint of its lift table) the
+    tangent changes, so a doublet that crosses one tests the model outside the range where any
+    linear model can hold. For every probe (input or state, :func:`nonsmooth`) whose slope jump
+    over the configured excursion ``a`` is at least ``jump_bar``, the smooth radius is the first
+    of ``a/2, a/4, ...`` (at most ``max_halvings``) with the jump below the bar; each run whose
+    excursion of that probe exceeds the radius is flown again with its amplitude scaled by
+    ``radius / excursion`` (the responses are linear in the amplitude to first order).
+
+    Parameters
+    ----------
+    ac : Aircraft
+        At the trim ``ts``.
+    ts : TrimState
+        The trim.
+    runs : DoubletRuns
+        The runs at the configured amplitudes.
+    jumps : dict
+        :func:`nonsmooth` of ``runs`` (``probe -> {"excursion", "jump"}``).
+    model : LinearModel, optional
+        The continuous model (turboprops: the N1 excursion of the throttle run comes from its
+        static gain and the identified lag, :func:`n1_excursions`).
+    jump_bar : float
+        Slope jump that counts as a kink [-].
+    max_halvings : int
+        Halvings of the excursion tried per probe.
+    """
+    flagged = {k: d for k, d in jumps.items() if d["jump"] >= jump_bar and d["excursion"] > 0}
+    radius: dict[str, float] = {}
+    no_range: dict[str, float] = {}
+    for probe, d in flagged.items():
+        a = float(d["excursion"])
+        j = float(d["jump"])
+        for _ in range(max_halvings):
+            a /= 2.0
+            j = slope_jumps(ac, ts, {probe: a}).get(probe, 0.0)
+            if j < jump_bar:
+                radius[probe] = a
+                break
+        else:
+            no_range[probe] = j
+    exc = _run_excursions(runs, model)
+    reduced: dict[str, dict[str, Any]] = {}
+    specs = []
+    for r, d in enumerate(runs.doublets):
+        f, by = 1.0, ""
+        for probe, rad in radius.items():
+            e = exc[r].get(probe, 0.0)
+            if e > rad and rad / e < f:
+                f, by = rad / e, probe
+        if f < 1.0:
+            reduced[d.input_name] = {"factor": f, "amplitude": d.amplitude * f, "by": by, "radius": radius[by],
+                                     "jump": float(flagged[by]["jump"])}
+            specs.append((r, replace(d, amplitude=d.amplitude * f)))
+    if not specs:
+        return LinearRangeRuns(runs=runs, reduced={}, no_smooth_range=no_range)
+    again = fly_doublets(ac, ts, [s for _, s in specs], runs.output_names, runs.duration_s)
+    du, dy, doublets = runs.du.copy(), runs.dy.copy(), list(runs.doublets)
+    for k, (r, spec) in enumerate(specs):
+        du[r], dy[r], doublets[r] = again.du[k], again.dy[k], spec
+    return LinearRangeRuns(runs=replace(runs, du=du, dy=dy, doublets=tuple(doublets)), reduced=reduced,
+                           no_smooth_range=no_range)
+
+
+def n1_excursions(runs: DoubletRuns, model: LinearModel | None) -> NDArray[np.float64]:
+    """Largest gas-generator excursion of each run [%], from the identified lag (zeros without one).
+
+    N1 follows ``K u`` (``K`` the model's static gain of its N1 row, :func:`lag_row`) by
+    FGTurboProp's ExpSeek with the lag of ``runs.engine_lag``; only the throttle run moves it.
+    """
+    out = np.zeros(len(runs.doublets))
+    lag = runs.engine_lag
+    if lag is None or model is None or lag.state_name not in model.state_names:
+        return out
+    _, _, K = lag_row(model, lag)
+    r_up, r_down = math.exp(-runs.dt_s / lag.tau_up_s), math.exp(-runs.dt_s / lag.tau_down_s)
+    for r, d in enumerate(runs.doublets):
+        if d.input_name != lag.input_name:
+            continue
+        z, peak = 0.0, 0.0
+        for t in K * runs.du[r]:  # N1 <- T + (N1 - T) exp(-dt / tau), tau by the direction of travel
+            z = t + (z - t) * (r_up if z < t else r_down)
+            peak = max(peak, abs(z))
+        out[r] = peak
+    return out
+
+
+def nonsmooth(ac: Aircraft, ts: TrimState, runs: DoubletRuns, model: LinearModel | None = None
+              ) -> dict[str, dict[str, float]]:
     """Slope jumps of JSBSim's model within the excursions of the doublet runs.
 
-    Probes: every doublet input except the throttle (its non-smoothness is the engine lag) and
-    the extra disturbances, with the doublet amplitude; and the states alpha, beta, p, q, r with
-    their largest excursion over all runs.
+    Probes: every doublet input except the throttle (it moves the gas generator, probed as N1)
+    and the extra disturbances, with the doublet amplitude; the states alpha, beta, p, q, r with
+    their largest excursion over all runs; and, for turboprops (``model`` given, an engine lag
+    identified), N1 with the throttle run's excursion (:func:`n1_excursions`).
 
     Returns
     -------
     dict
         ``probe -> {"excursion": a, "jump": relative slope jump}`` [units of the probe, -].
     """
-    from fdi_sim.aircraft.linearize_state import CONTROL_INPUTS, GUST_INPUTS
-
-    probes = {d.input_name: d.amplitude for d in runs.doublets
-              if d.input_name in CONTROL_INPUTS + GUST_INPUTS and d.input_name != "throttle_cmd_norm"}
-    for name in STATE_PROBES:
-        if name in runs.output_names:
-            probes[name] = float(np.max(np.abs(runs.dy[:, :, runs.output_names.index(name)])))
+    probes = {name: float(np.max([e.get(name, 0.0) for e in _run_excursions(runs, model)]))
+              for name in _probe_names(runs, model)}
     jumps = slope_jumps(ac, ts, probes)
     return {k: {"excursion": float(probes[k]), "jump": v} for k, v in jumps.items()}
+
+
+def _probe_names(runs: DoubletRuns, model: LinearModel | None) -> list[str]:
+    from fdi_sim.aircraft.linearize_state import CONTROL_INPUTS, GUST_INPUTS
+
+    names = [d.input_name for d in runs.doublets
+             if d.input_name in CONTROL_INPUTS + GUST_INPUTS and d.input_name != "throttle_cmd_norm"]
+    names += [n for n in STATE_PROBES if n in runs.output_names]
+    if np.any(n1_excursions(runs, model) > 0):
+        names.append(N1_PROBE)
+    return names
 
 
 #: discretizations validated by :func:`linearize_grid` by default: the detectors' ZOH model and the

@@ -24,11 +24,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from fdi_sim.linear.schedule import ModelSchedule, SchedulePoint
-from fdi_sim.linear.validate import NRMSE_BAR
-
-#: a slope jump (:func:`~fdi_sim.aircraft.linearize_response.slope_jumps`, ``info["nonsmooth"]``) at
-#: least this large within a doublet's excursion is listed as a non-smoothness of JSBSim's model there [-]
-NONSMOOTH_JUMP: float = 0.05
+from fdi_sim.linear.validate import ENGINE_LAG_KEY, NONSMOOTH_JUMP, NRMSE_BAR
 
 
 def _fmt(x: Any, spec: str = ".3g") -> str:
@@ -55,12 +51,31 @@ def _mode_cell(modes: Sequence[dict[str, Any]], name: str) -> str:
     return "; ".join(cells)
 
 
-#: the ``info`` key of the validation with the identified N1 lag (see the module notes)
-ENGINE_LAG_KEY: str = "validation_engine_lag"
+
+#: the pseudo-method of the bar's own validation (:func:`bar_entry`)
+BAR: str = "bar"
 
 
-def _entry(p: SchedulePoint, method: str) -> dict[str, Any] | None:
-    """The validation entry of ``p`` for ``method`` (a discretization, or :data:`ENGINE_LAG_KEY`)."""
+def bar_entry(p: SchedulePoint, method: str = "step") -> dict[str, Any] | None:
+    """The validation entry the bar is judged on at ``p``.
+
+    The ``method`` model (``"step"`` where validated, :func:`bar_method`), flown with the
+    identified N1 lag where the engine has one (:data:`ENGINE_LAG_KEY`), on doublets kept inside
+    the smooth range of JSBSim's tables (``info["linear_range"]``,
+    :func:`fdi_sim.linear.linearize.linear_range_runs`; the configured doublets in schedules
+    made before it existed).
+    """
+    src = p.info.get("linear_range") or p.info
+    lag = src.get(ENGINE_LAG_KEY)
+    if lag is not None and lag.get("method", method) == method:
+        return lag
+    return src.get("validation", {}).get(method)
+
+
+def _entry(p: SchedulePoint, method: str, schedule: ModelSchedule | None = None) -> dict[str, Any] | None:
+    """The validation entry of ``p`` for ``method`` (a discretization, :data:`ENGINE_LAG_KEY` or :data:`BAR`)."""
+    if method == BAR:
+        return bar_entry(p, bar_method(schedule) if schedule is not None else "step")
     if method == ENGINE_LAG_KEY:
         return p.info.get(ENGINE_LAG_KEY)
     return p.info.get("validation", {}).get(method)
@@ -73,13 +88,19 @@ def worst_validation(schedule: ModelSchedule, method: str) -> tuple[str, str, fl
     """
     best: tuple[str, str, float] | None = None
     for p in schedule.ok_points:
-        v = _entry(p, method)
+        v = _entry(p, method, schedule)
         if v and (best is None or v["worst"] > best[2]):
             best = (p.op.label(), v["worst_output"], float(v["worst"]))
     return best
 
 
-def _label(method: str, schedule: ModelSchedule | None = None) -> str:
+def method_label(method: str, schedule: ModelSchedule | None = None) -> str:
+    """How the report names a validation: a discretization, the engine-lag one or :data:`BAR`."""
+    if method == BAR:
+        meth = bar_method(schedule) if schedule is not None else "step"
+        lag = schedule is not None and any(ENGINE_LAG_KEY in p.info for p in schedule.ok_points)
+        return (f"{meth}" + (" with the identified N1 lag" if lag else "") +
+                ", doublets inside the smooth range of JSBSim's tables")
     if method != ENGINE_LAG_KEY:
         return method
     base = "zoh"
@@ -95,10 +116,18 @@ def bar_method(schedule: ModelSchedule) -> str:
     return "step" if any("step" in p.info.get("validation", {}) for p in schedule.ok_points) else "zoh"
 
 
-def nonsmooth_causes(p: SchedulePoint, min_jump: float = NONSMOOTH_JUMP) -> list[str]:
-    """What JSBSim does at ``p`` that no linear model holds: slope jumps and the engine lag."""
+def nonsmooth_causes(p: SchedulePoint, min_jump: float = NONSMOOTH_JUMP,
+                     key: tuple[str, ...] = ("nonsmooth",)) -> list[str]:
+    """What JSBSim does at ``p`` that no linear model holds: slope jumps and the engine lag.
+
+    ``key`` is the path of the slope jumps in ``p.info`` (``("linear_range", "nonsmooth")`` for
+    those of the doublets kept in the smooth range).
+    """
     out = []
-    for name, d in sorted(p.info.get("nonsmooth", {}).items(), key=lambda kv: -kv[1]["jump"]):
+    jumps: Any = p.info
+    for k in key:
+        jumps = jumps.get(k, {}) if isinstance(jumps, dict) else {}
+    for name, d in sorted(jumps.items(), key=lambda kv: -kv[1]["jump"]):
         if d["jump"] >= min_jump:
             out.append(f"{name}: slopes differ by {d['jump']:.0%} across +-{d['excursion']:.3g}")
     lag = p.info.get("engine_lag")
@@ -114,10 +143,10 @@ def _summary_lines(schedule: ModelSchedule, method: str) -> list[str]:
     w = worst_validation(schedule, method)
     if not w:
         return []
-    entries = [(p, _entry(p, method)) for p in ok]
+    entries = [(p, _entry(p, method, schedule)) for p in ok]
     entries = [(p, v) for p, v in entries if v]
     n_pass = sum(bool(v.get("passed")) for _, v in entries)
-    lines = [f"- validation ({_label(method, schedule)}): {n_pass}/{len(entries)} points below {NRMSE_BAR:.0%} on every "
+    lines = [f"- validation ({method_label(method, schedule)}): {n_pass}/{len(entries)} points below {NRMSE_BAR:.0%} on every "
              f"output; worst {w[1]} {w[2]:.1%} at {w[0]}"]
     wt = max(((v["worst_without_throttle"], v["worst_output_without_throttle"], p.op.label()) for p, v in entries),
              default=None)
@@ -131,10 +160,10 @@ def _summary_lines(schedule: ModelSchedule, method: str) -> list[str]:
 def _validation_table(schedule: ModelSchedule, method: str) -> list[str]:
     """One row per point: worst output, the run it comes from, and every output's error [%]."""
     outs = schedule.names.get("output_names", ())
-    lines = [f"### {_label(method, schedule)}", "", "| point | worst output | worst | largest error from | "
+    lines = [f"### {'bar: ' if method == BAR else ''}{method_label(method, schedule)}", "", "| point | worst output | worst | largest error from | "
              "worst w/o throttle | " + " | ".join(outs) + " |", "|---" * (5 + len(outs)) + "|"]
     for p in schedule.ok_points:
-        v = _entry(p, method)
+        v = _entry(p, method, schedule)
         if not v:
             continue
         # the run that contributes most squared error to the worst output
@@ -148,13 +177,51 @@ def _validation_table(schedule: ModelSchedule, method: str) -> list[str]:
     return lines + [""]
 
 
+def reduced_doublets(p: SchedulePoint) -> list[str]:
+    """The doublets flown smaller at ``p`` to stay inside the smooth range, with the kink that made it so."""
+    out = []
+    lr = p.info.get("linear_range") or {}
+    for name, r in lr.get("reduced", {}).items():
+        out.append(f"{name} x{r['factor']:.2g} ({r['by']}: slopes differ by {r['jump']:.0%} across the configured "
+                   f"doublet, by less than {NONSMOOTH_JUMP:.0%} within +-{r['radius']:.2g})")
+    for name, j in lr.get("no_smooth_range", {}).items():
+        out.append(f"{name}: kink at the trim itself (slopes differ by {j:.0%} however small the excursion)")
+    return out
+
+
 def _bar_lines(schedule: ModelSchedule) -> list[str]:
-    """The bar's method, and every point that misses it with the non-smoothness JSBSim has there."""
+    """The bar, the doublets made smaller and why, and every point that misses it with its causes."""
+    meth = bar_method(schedule)
+    entries = [(p, bar_entry(p, meth)) for p in schedule.ok_points]
+    entries = [(p, v) for p, v in entries if v]
+    if not entries:
+        return []
+    miss = [p for p, v in entries if not v.get("passed")]
+    w = max(entries, key=lambda e: e[1]["worst"])
+    lines = [f"- **bar** ({NRMSE_BAR:.0%} on every output; {method_label(BAR, schedule)}): "
+             f"**{len(entries) - len(miss)}/{len(entries)} points pass**; worst {w[1]['worst_output']} "
+             f"{w[1]['worst']:.1%} at {w[0].op.label()}"]
+    red = [(p, reduced_doublets(p)) for p, _ in entries]
+    red = [(p, r) for p, r in red if r]
+    if red:
+        lines.append(f"  - doublets made smaller at {len(red)}/{len(entries)} points (elsewhere as configured):")
+        lines += [f"    - {p.op.label()}: " + "; ".join(r) for p, r in red]
+    for p in miss:
+        v = bar_entry(p, meth)
+        assert v is not None
+        causes = nonsmooth_causes(p, key=("linear_range", "nonsmooth"))
+        lines.append(f"  - misses: {p.op.label()}: {v['worst_output']} {v['worst']:.1%}; "
+                     + ("; ".join(causes) if causes else "no slope jump found within the doublets"))
+    return lines + _configured_lines(schedule)
+
+
+def _configured_lines(schedule: ModelSchedule) -> list[str]:
+    """The linear model as it is at the configured amplitudes, and what JSBSim does where it misses."""
     meth = bar_method(schedule)
     entries = [(p, p.info.get("validation", {}).get(meth)) for p in schedule.ok_points]
     entries = [(p, v) for p, v in entries if v]
     miss = [(p, v) for p, v in entries if not v.get("passed")]
-    lines = [f"- bar ({NRMSE_BAR:.0%} on every output) judged on '{meth}': {len(entries) - len(miss)}/{len(entries)} "
+    lines = [f"- '{meth}' as it is, configured doublets: {len(entries) - len(miss)}/{len(entries)} "
              "points pass" + ("; the others, with what JSBSim does there that no linear model holds:" if miss else "")]
     for p, v in miss:
         causes = nonsmooth_causes(p)
@@ -222,10 +289,18 @@ def format_report(schedule: ModelSchedule, figure: str | None = None) -> str:
         if lag:
             lines += ["The gas generator of the DHC-6 follows the throttle with 1 s up and 2.4 s down "
                       "(FGTurboProp), which no linear model holds: a throttle doublet leaves N1 above the "
-                      f"trim. '{_label(ENGINE_LAG_KEY, schedule)}' flies the model with that lag, identified from "
+                      f"trim. '{method_label(ENGINE_LAG_KEY, schedule)}' flies the model with that lag, identified from "
                       "JSBSim at each point, in place of its N1 row; the tables named by a discretization "
                       "score the linear model itself.", ""]
-        for meth in (*methods, *lag):
+        bar = [BAR] if any("linear_range" in p.info for p in ok) else []
+        if bar:
+            lines += [f"'bar: {method_label(BAR, schedule)}' is the table the bar is judged on: each doublet that carries "
+                      "JSBSim across a kink of its tables (a slope jump of at least "
+                      f"{NONSMOOTH_JUMP:.0%} within its excursion, of its own input or of alpha, beta, p, q, r) "
+                      "is flown again with its amplitude scaled to the largest excursion without one "
+                      "(fdi_sim.linear.linearize.linear_range_runs). The other tables keep the configured "
+                      "doublets.", ""]
+        for meth in (*bar, *methods, *lag):
             lines += _validation_table(schedule, meth)
     fg = [p for p in ok if "fglin" in p.info]
     if fg:

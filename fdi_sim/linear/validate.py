@@ -55,6 +55,13 @@ if TYPE_CHECKING:  # the JSBSim side, imported where it is flown
 #: the bar of issue 4: normalized RMS error per output below 5 %
 NRMSE_BAR: float = 0.05
 
+#: a slope jump (:func:`~fdi_sim.aircraft.linearize_response.slope_jumps`) at least this large
+#: within a doublet's excursion is a kink of JSBSim's model there, which no linear model holds [-]
+NONSMOOTH_JUMP: float = 0.05
+
+#: the point-info key of the validation flown with the identified N1 lag (turboprops)
+ENGINE_LAG_KEY: str = "validation_engine_lag"
+
 
 @dataclass(frozen=True)
 class DoubletSpec:
@@ -155,7 +162,7 @@ def _simulate_batch(model: LinearModel, du: NDArray[np.float64], engine_lag: Eng
     xs = np.empty((N, model.n_states, R))
     xs[:1] = 0.0
     if engine_lag is not None:
-        i, j, K = _lag_row(model, engine_lag)
+        i, j, K = lag_row(model, engine_lag)
         target = K * du[:, :, j].T  # (N, R)
         r_up, r_down = math.exp(-model.dt_s / engine_lag.tau_up_s), math.exp(-model.dt_s / engine_lag.tau_down_s)
     for k in range(N - 1):  # x_{k+1} = A x_k + B u_k
@@ -169,8 +176,11 @@ def _simulate_batch(model: LinearModel, du: NDArray[np.float64], engine_lag: Eng
     return (model.C @ xs).transpose(2, 0, 1) + du @ model.D.T
 
 
-def _lag_row(model: LinearModel, lag: EngineLag) -> tuple[int, int, float]:
-    """State index, input index and static gain ``B_ij / (1 - A_ii)`` of the engine-lag row."""
+def lag_row(model: LinearModel, lag: EngineLag) -> tuple[int, int, float]:
+    """State index, input index and static gain of the engine-lag row.
+
+    The gain is ``B_ij / (1 - A_ii)`` for a discrete model and ``-B_ij / A_ii`` for a continuous one.
+    """
     if lag.state_name not in model.state_names or lag.input_name not in model.input_names:
         raise DesignError(f"engine lag on {lag.state_name!r} <- {lag.input_name!r}: the model has no such "
                           f"state or input (states {', '.join(model.state_names)})")
@@ -180,7 +190,9 @@ def _lag_row(model: LinearModel, lag: EngineLag) -> tuple[int, int, float]:
     if np.max(np.abs(a_row), initial=0.0) > 1e-6 or np.max(np.abs(b_row), initial=0.0) > 1e-6 * scale:
         raise DesignError(f"the {lag.state_name} row depends on other states or inputs; the engine lag "
                           "replaces a first-order row driven by one input only")
-    return i, j, float(model.B[i, j] / (1.0 - model.A[i, i]))
+    if model.is_discrete:
+        return i, j, float(model.B[i, j] / (1.0 - model.A[i, i]))
+    return i, j, float(-model.B[i, j] / model.A[i, i])
 
 
 def nrmse(y_lin: NDArray[np.float64], y_nl: NDArray[np.float64], axis: int | tuple[int, ...] = 0) -> NDArray[np.float64]:

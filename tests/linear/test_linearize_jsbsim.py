@@ -256,6 +256,37 @@ def test_slope_jumps_find_the_left_aileron_kink() -> None:
         slope_jumps(ac, lp.trim_state, {"no_such_input": 1.0})
 
 
+def test_linear_range_flies_only_the_kink_crossing_doublet_smaller() -> None:
+    """DHC-6 5000 ft / 132 KCAS: the configured 0.004 aileron doublet crosses the left aileron's
+    kink at zero deflection (trim command about 0.001 from it) and fails (phi 16-18 %); the smooth
+    radius found by halving is no larger than the distance to the kink, only the aileron doublet is
+    flown again, and with it the model passes. At 124 KCAS (trim 0.003) nothing is changed."""
+    from fdi_sim.linear.linearize import linear_range_runs, nonsmooth
+
+    ac = Aircraft("DHC6")
+    grid = load_grid(default_grid_path("DHC6"), "DHC6")
+    out = {}
+    for vc in (124.0, 132.0):
+        lp = linearize(ac, OperatingPoint("DHC6", 5000.0, vc_kts=vc))
+        m = lp.model
+        runs = fly_doublets(ac, lp.trim_state, default_doublets(m, grid.validation), m.output_names, 10.0)
+        lr = linear_range_runs(ac, lp.trim_state, runs, nonsmooth(ac, lp.trim_state, runs))
+        md = discretize(m, ac.dt_s, method="step")
+        out[vc] = (lp, runs, lr, compare(md, runs, engine_lag=True), compare(md, lr.runs, engine_lag=True))
+    lp, runs, lr, before, after = out[132.0]
+    assert set(lr.reduced) == {"aileron_cmd_norm"} and lr.reduced["aileron_cmd_norm"]["by"] == "aileron_cmd_norm"
+    trim_cmd = abs(lp.trim["aileron_cmd_norm"])
+    assert lr.reduced["aileron_cmd_norm"]["radius"] <= 1.5 * trim_cmd < 0.004
+    ia = runs.input_names.index("aileron_cmd_norm")
+    assert lr.runs.doublets[ia].amplitude == pytest.approx(0.004 * lr.reduced["aileron_cmd_norm"]["factor"])
+    others = [i for i in range(len(runs.doublets)) if i != ia]
+    assert np.array_equal(lr.runs.dy[others], runs.dy[others])  # the other runs are not flown again
+    assert before.worst[0] == "phi_rad" and before.worst[1] > 0.1
+    assert after.passed(), after.worst
+    lp, runs, lr, before, after = out[124.0]
+    assert lr.reduced == {} and lr.runs is runs and before.passed()
+
+
 def test_simulation_integrates_with_ab3() -> None:
     """Aircraft sets all four FGPropagate integrators to AB3 (4); JSBSim keeps them through trims."""
     ac = Aircraft("DHC6")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fdi_sim.linear.report import ENGINE_LAG_KEY, bar_method, format_report, nonsmooth_causes, worst_validation
+from fdi_sim.linear.report import BAR, ENGINE_LAG_KEY, bar_entry, bar_method, format_report, nonsmooth_causes, worst_validation
 from fdi_sim.linear.schedule import ModelSchedule, SchedulePoint
 from fdi_sim.operating_point import OperatingPoint
 
@@ -77,7 +77,11 @@ def test_bar_is_judged_on_the_step_model_and_names_the_causes() -> None:
     s.meta["validation"]["methods"] = ["zoh", "step"]
     assert bar_method(s) == "step"
     text = format_report(s)
-    assert "- bar (5% on every output) judged on 'step': 0/2 points pass" in text
+    # without linear-range entries (older schedules) the bar reads the step model with the N1 lag
+    assert ("- **bar** (5% on every output; step with the identified N1 lag, doublets inside the smooth range of "
+            "JSBSim's tables): **1/2 points pass**; worst nx_g 6.7% at DHC6 h=5000 ft VC=120 kt") in text
+    assert "  - misses: DHC6 h=5000 ft VC=120 kt: nx_g 6.7%" in text
+    assert "- 'step' as it is, configured doublets: 0/2 points pass" in text
     assert "- validation (step with the identified N1 lag): 1/2 points" in text
     line100 = next(ln for ln in text.splitlines() if ln.startswith("  - DHC6 h=5000 ft VC=100 kt:"))
     assert "with the identified N1 lag it passes" in line100 and "aileron" not in line100
@@ -90,3 +94,29 @@ def test_bar_is_judged_on_the_step_model_and_names_the_causes() -> None:
                                                  "non-smooth at the trim)"]
     del s.ok_points[0].info["validation"]["step"], s.ok_points[1].info["validation"]["step"]
     assert bar_method(s) == "zoh"
+
+
+def test_bar_reads_the_linear_range_validation_and_lists_the_smaller_doublets() -> None:
+    """A point whose aileron doublet was flown smaller (kink at zero left-aileron deflection) is
+    judged on that validation, and the report says which doublet, by how much and why."""
+    s = _schedule()
+    for p in s.ok_points:
+        p.info["validation"]["step"] = p.info["validation"]["zoh"]
+        p.info[ENGINE_LAG_KEY]["method"] = "step"
+    p = s.ok_points[1]
+    p.info["linear_range"] = {
+        "doublets": {"elevator_cmd_norm": 0.01, "throttle_cmd_norm": 0.001},
+        "reduced": {"throttle_cmd_norm": {"factor": 0.25, "amplitude": 0.005, "by": "alpha_rad", "radius": 0.001,
+                                          "jump": 0.12}},
+        "no_smooth_range": {}, "nonsmooth": {},
+        "validation": {"step": _entry([[0.01, 0.02, 0.01], [0.5, 0.5, 0.5]])},
+        ENGINE_LAG_KEY: {**_entry([[0.01, 0.02, 0.01], [0.02, 0.03, 0.04]]), "method": "step"},
+    }
+    assert bar_entry(p)["worst"] == bar_entry(p, "step")["worst"] == np.sqrt((0.01**2 + 0.04**2) / 2)
+    assert bar_entry(s.ok_points[0]) is s.ok_points[0].info[ENGINE_LAG_KEY]  # no linear range: as configured
+    text = format_report(s)
+    assert "**2/2 points pass**" in text
+    assert ("    - DHC6 h=5000 ft VC=120 kt: throttle_cmd_norm x0.25 (alpha_rad: slopes differ by 12% across the "
+            "configured doublet, by less than 5% within +-0.001)") in text
+    assert "### bar: step with the identified N1 lag, doublets inside the smooth range" in text
+    assert worst_validation(s, BAR) == ("DHC6 h=5000 ft VC=120 kt", "h_ft", np.sqrt((0.01**2 + 0.04**2) / 2))
