@@ -1,7 +1,7 @@
 """The linearizer against JSBSim: FGLinearization, the notes' eigenvalues, physics checks, validation.
 
 One representative point per aircraft (F-16 10 kft / 400 KTAS, DHC-6 5000 ft / 120 KCAS); the
-full default grids are in ``test_grids_slow.py`` (``-m slow``).
+full default grids are in ``test_default_grids.py``.
 """
 from __future__ import annotations
 
