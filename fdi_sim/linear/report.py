@@ -307,8 +307,11 @@ def format_report(schedule: ModelSchedule, figure: str | None = None) -> str:
         lines += ["## FGLinearization check (same 10 states, eigenvalues matched one to one)", "",
                   "'sim' are the poles of the step model mapped back by ln(z)/dt: the modes of the 120 Hz "
                   "simulation itself, validated against it above. FGLinearization reads its derivatives "
-                  "after JSBSim's Initialize and one Run (two passes, FGStateSpace::run), with the FCS and "
-                  "the PID derivative terms still moving from the previous evaluation of its stencil.", "",
+                  "after JSBSim's Initialize and one Run (two passes, FGStateSpace::run), with the FBW still "
+                  "moving from the previous evaluation of its stencil (F-16 roll root: beta-dot without the "
+                  "yaw damper's rudder, the yaw-load PID's derivative term); its own procedure with the "
+                  "passes settled gives our model (fdi_sim.aircraft.fglin_replica, "
+                  "tests/linear/test_fglin_roll_root.py).", "",
                   "| point | max relative difference | worst mode | roll: ours vs sim | roll: FGLin vs sim |",
                   "|---|---|---|---|---|"]
         for p in fg:

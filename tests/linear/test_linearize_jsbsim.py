@@ -47,9 +47,12 @@ def test_f16_eigenvalues_match_fglinearization(f16) -> None:
     step model (the discrete model of JSBSim's 120 Hz step, validated against JSBSim below to
     1.6 % on every output) mapped back by ln(z)/dt put the roll root at -1.031 1/s; ours is -1.039
     (0.7 % off), FGLinearization's -1.094 (6.1 % off). FGLinearization reads its derivatives after
-    JSBSim's Initialize and one Run (two passes, ``FGStateSpace::run``), with the FCS still
-    carrying the previous stencil evaluation (the roll PID's derivative term, the stale air data);
-    our central differences settle every signal. So the roll root is allowed 5.5 % against
+    JSBSim's Initialize and one Run (two passes, ``FGStateSpace::run``), with the yaw channel
+    still carrying the previous stencil evaluation: beta-dot from the previous pass's accelerations
+    without the yaw damper's rudder, the yaw-load PID's derivative term and its stale side
+    acceleration (not the roll PID). ``test_fglin_roll_root.py`` shows it: FGLinearization's own
+    procedure replayed through the Python API gives its A and B bit for bit with its pass count and
+    our roll root (-1.0389) once the passes settle. So the roll root is allowed 5.5 % against
     FGLinearization, and the referee numbers are asserted.
     """
     _, lp = f16
