@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 import fdi_sim
 from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, PassJacobians, central_difference
 from fdi_sim.aircraft.linearize_response import N1_PROBE, STATE_PROBES, slope_jumps
+from fdi_sim.aircraft.fglin_replica import ReplicaLinearization, fglin_replica
 from fdi_sim.aircraft.linearize_fglin import JsbsimLinearization, fglinearization
 from fdi_sim.aircraft.linearize_state import LAGGED_OUTPUTS, TrimState, capture_trim, has_propeller
 from fdi_sim.aircraft.model import AIRCRAFT, Aircraft
@@ -50,6 +51,10 @@ from fdi_sim.linear.validate import (
 )
 from fdi_sim.operating_point import OperatingPoint
 from fdi_sim.units import KT_PER_FPS
+
+#: trim-status passes per evaluation that settle the F-16 FBW in FGLinearization's procedure
+#: (FGLinearization itself reads after one; tests/linear/test_fglin_roll_root.py)
+SETTLED_PASSES: int = 5
 
 #: aero-axis rigid-body state, in order
 AERO_STATES: tuple[str, ...] = (
@@ -138,8 +143,9 @@ def to_linear_model(bj: BodyJacobians, op: OperatingPoint | None = None, meta: d
     )
 
 
-def fglin_in_aero_order(jl: JsbsimLinearization, state_names: Sequence[str]) -> NDArray[np.float64]:
-    """FGLinearization's ``A`` restricted and reordered to our aero states (Lat, Lon, Rpm dropped)."""
+def fglin_in_aero_order(jl: JsbsimLinearization | ReplicaLinearization, state_names: Sequence[str]
+                        ) -> NDArray[np.float64]:
+    """FGLinearization's (or its replica's) ``A`` restricted and reordered to our aero states (Lat, Lon, Rpm dropped)."""
     idx = [jl.x_names.index(_AERO_TO_FGLIN[s]) for s in state_names if s in _AERO_TO_FGLIN]
     return jl.A[np.ix_(idx, idx)]
 
@@ -163,6 +169,9 @@ class LinearizedPoint:
         Continuous-time model in aero states (``dt_s = 0``).
     fglin_eigs : NDArray or None
         Eigenvalues of FGLinearization's ``A`` on the same states (F-16 cross-check) [1/s].
+    fglin_settled_eigs : NDArray or None
+        The same from FGLinearization's procedure with :data:`SETTLED_PASSES` passes per
+        evaluation instead of its one (:func:`~fdi_sim.aircraft.fglin_replica.fglin_replica`) [1/s].
     timing_s : dict
         Wall time of ``trim``, ``fd`` and ``fglin`` [s].
     trim_state : TrimState or None
@@ -175,6 +184,7 @@ class LinearizedPoint:
     trim: dict[str, float | str] = field(default_factory=dict)
     model: LinearModel | None = None
     fglin_eigs: NDArray[np.complex128] | None = None
+    fglin_settled_eigs: NDArray[np.complex128] | None = None
     timing_s: dict[str, float] = field(default_factory=dict)
     trim_state: TrimState | None = None
 
@@ -240,16 +250,23 @@ def linearize(ac: Aircraft, op: OperatingPoint, settings: FDSettings | None = No
     fg_eigs = None
     if check_fglin is None:
         check_fglin = not has_propeller(ac)
+    settled_eigs = None
     if check_fglin:
         jl = fglinearization(ac)  # right after JSBSim's trim, as it needs; refuses propeller aircraft
         timing["fglin"] = jl.elapsed_s
         fg_eigs = np.linalg.eigvals(fglin_in_aero_order(jl, AERO_STATES))
+        # FGLinearization's own procedure with its passes settled, from the same trim again
+        # (fdi_sim.aircraft.fglin_replica): it reads after two passes, with the FBW one pass behind
+        tr = trim(ac, op)
+        rep = fglin_replica(ac, n_runs=SETTLED_PASSES)
+        timing["fglin_settled"] = rep.elapsed_s
+        settled_eigs = np.linalg.eigvals(fglin_in_aero_order(rep, AERO_STATES))
     bj = central_difference(ac, tr, settings)
     timing["fd"] = bj.elapsed_s
     meta = {"aircraft": ac.name, "method": "central differences about the trim (fdi_sim.aircraft.linearize)",
             "trim_method": tr.method}
     return LinearizedPoint(op=op, status="ok", trim=summary, model=to_linear_model(bj, op=op, meta=meta),
-                           fglin_eigs=fg_eigs, timing_s=timing, trim_state=ts)
+                           fglin_eigs=fg_eigs, fglin_settled_eigs=settled_eigs, timing_s=timing, trim_state=ts)
 
 
 # ---------------------------------------------------------------------- grids
@@ -328,6 +345,9 @@ def _point_info(ac: Aircraft, lp: LinearizedPoint, validation: ValidationSetting
                             "engine": m.meta.get("engine"), "knob_condition": m.meta.get("knob_condition")}
     if lp.fglin_eigs is not None:
         info["fglin"] = _fglin_info(m, lp.fglin_eigs, ac.dt_s)
+        if lp.fglin_settled_eigs is not None:
+            settled = _fglin_info(m, lp.fglin_settled_eigs)
+            info["fglin"]["settled"] = {"max_rel": settled["max_rel"], "per_mode": settled["per_mode"]}
     if validation is not None:
         t0 = time.perf_counter()
         runs = fly_doublets(ac, lp.trim_state, default_doublets(m, validation), m.output_names, validation.duration_s)

@@ -309,19 +309,23 @@ def format_report(schedule: ModelSchedule, figure: str | None = None) -> str:
                   "simulation itself, validated against it above. FGLinearization reads its derivatives "
                   "after JSBSim's Initialize and one Run (two passes, FGStateSpace::run), with the FBW still "
                   "moving from the previous evaluation of its stencil (F-16 roll root: beta-dot without the "
-                  "yaw damper's rudder, the yaw-load PID's derivative term); its own procedure with the "
-                  "passes settled gives our model (fdi_sim.aircraft.fglin_replica, "
-                  "tests/linear/test_fglin_roll_root.py).", "",
-                  "| point | max relative difference | worst mode | roll: ours vs sim | roll: FGLin vs sim |",
-                  "|---|---|---|---|---|"]
+                  "yaw damper's rudder, the yaw-load PID's derivative term). 'FGLin procedure settled' is "
+                  "FGLinearization's own procedure (4th-order stencil, h = 1e-4) replayed with five passes per "
+                  "evaluation (fdi_sim.aircraft.fglin_replica; with one it equals FGLinearization bit for bit, "
+                  "tests/linear/test_fglin_roll_root.py): its largest relative eigenvalue difference to ours.", "",
+                  "| point | max relative difference | worst mode | FGLin procedure settled: max difference "
+                  "| roll: ours vs sim | roll: FGLin vs sim |",
+                  "|---|---|---|---|---|---|"]
         for p in fg:
             pm = p.info["fglin"]["per_mode"]
             wm = max(pm, key=pm.get) if pm else "-"
             sim = p.info["fglin"].get("sim", {})
             roll = [k for k in sim.get("ours_vs_sim", {}) if k.startswith("roll")]
             cells = (f"{sim['ours_vs_sim'][roll[0]]:.2%} | {sim['fglin_vs_sim'][roll[0]]:.2%}" if roll else "- | -")
+            settled = p.info["fglin"].get("settled")
+            sc = f"{settled['max_rel']:.1e}" if settled else "-"
             lines.append(f"| {p.op.h_ft:g} ft {_speed(p)} | {p.info['fglin']['max_rel']:.2%} | {wm} ({pm.get(wm, 0):.2%}) "
-                         f"| {cells} |")
+                         f"| {sc} | {cells} |")
         lines.append("")
     lines += ["## Points without a model", ""]
     if not bad:

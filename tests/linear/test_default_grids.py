@@ -49,11 +49,13 @@ def test_default_f16_grid() -> None:
     ok = s.ok_points
     assert len(ok) == len(grid.points)  # every default point is inside the trimmable envelope
     # FGLinearization within 5 % except the roll root (<= 7 %), and for that root the simulation
-    # itself (the poles of the step model) sides with ours at every point
+    # itself (the poles of the step model) sides with ours at every point; FGLinearization's
+    # procedure with its passes settled gives ours (measured: 6.6e-5 at most)
     for p in ok:
         fg = p.info["fglin"]
         pm = fg["per_mode"]
         assert all(v < (0.07 if k.startswith("roll") else 0.05) for k, v in pm.items() if abs(float(k.split()[-1])) > 1e-3), pm
+        assert fg["settled"]["max_rel"] < 2e-4, (p.op.label(), fg["settled"])  # its own procedure, settled: ours
         roll = [k for k in pm if k.startswith("roll")][0]
         assert fg["sim"]["ours_vs_sim"][roll] < 0.015
         assert fg["sim"]["fglin_vs_sim"][roll] > 2 * fg["sim"]["ours_vs_sim"][roll], (p.op.label(), fg["sim"])
