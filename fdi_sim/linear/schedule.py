@@ -28,8 +28,9 @@ altitude ``h_ft`` and calibrated airspeed ``vc_kts`` (air data), plus the config
 thresholds) are made per grid point and the model must be the one the design was made from.
 ``interpolate=True`` blends the continuous matrices of the enclosing triangle (barycentric, in
 the (h, vc) plane of the same flaps/eta) before discretizing: smoother, but no design exists for
-it. A lookup farther than ``max_distance`` spacings from every point is refused; beyond half a
-spacing outside the grid it warns with the distance.
+it. A lookup farther than ``max_distance`` spacings from every point is refused; more than half a
+spacing outside the box of the grid it warns with the distance (inside, the nearest point of a
+full grid is at most half a cell diagonal away, which is what a schedule is built for).
 """
 from __future__ import annotations
 
@@ -225,6 +226,11 @@ class ModelSchedule:
         """Distance of scheduling values ``s`` to every point with a model [grid spacings]."""
         return np.sqrt(np.sum(((self._X - s) / self._spacing) ** 2, axis=1))
 
+    def outside_distance(self, s: NDArray[np.float64]) -> float:
+        """How far scheduling values ``s`` lie outside the box of the grid's points [grid spacings] (0 inside)."""
+        lo, hi = self._X.min(axis=0), self._X.max(axis=0)
+        return float(np.sqrt(np.sum((np.maximum(0.0, np.maximum(lo - s, s - hi)) / self._spacing) ** 2)))
+
     def model_at(self, op: OperatingPoint, dt_s: float = DEFAULT_DT_S, method: str = "zoh",
                  interpolate: bool = False, max_distance: float = MAX_DISTANCE) -> ScheduledModel:
         """The discrete-time model for ``op`` (nearest point, or interpolated).
@@ -282,9 +288,11 @@ class ModelSchedule:
             else:
                 rows, w, how = tri[0], tri[1], "interpolated"
                 why = "barycentric blend of the enclosing triangle's continuous models in (h_ft, vc_kts)"
-        if dist > 0.5 and how == "nearest":
+        outside = self.outside_distance(s)
+        if outside > 0.5:  # inside the grid the nearest point is at most half a cell diagonal away
             warnings.warn(f"{self.aircraft} schedule lookup at {where} is {dist:.2f} grid spacings from the nearest "
-                          "point; the linear model may not represent the aircraft there", stacklevel=2)
+                          f"point, {outside:.2f} outside the grid; the linear model may not represent the aircraft "
+                          "there", stacklevel=2)
         key = (tuple(rows), tuple(round(x, 12) for x in w), dt_s, method)
         model = self._cache.get(key)
         if model is None:

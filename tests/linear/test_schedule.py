@@ -107,6 +107,8 @@ def test_far_lookups_warn_then_refuse() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         s.lookup([10000.0, 300.0, 0.0, 0.0])  # on a point: silent
+        r = s.lookup([7500.0, 310.0, 0.0, 0.0])  # mid-cell: far from every point, but inside the grid
+        assert r.distance > 0.5 and s.outside_distance(np.array([7500.0, 310.0, 0.0, 0.0])) == 0.0
 
 
 def test_tracker_follows_the_air_data_with_hysteresis() -> None:
