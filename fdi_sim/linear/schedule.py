@@ -17,7 +17,7 @@ File format (``.npz``, numpy, no pickle; loads in milliseconds)
           (:class:`~fdi_sim.linear.model.StepTerms`: how the derivatives build up within JSBSim's
           step), shapes (K, P, r, n), (K, P, r, m), (K, q, r); ``meta`` holds their step
           ``step_dt_s``, ``n_rigid`` and ``lagged_outputs``. With them ``method="step"`` gives the
-          discrete model of the simulation step (at the simulation's ``dt_s`` only).
+          discrete model of the simulation step (at the simulation's ``dt_s`` or a multiple of it).
 
 Lookup
 ------
@@ -243,7 +243,7 @@ class ModelSchedule:
             Detector sample time [s] (default 1/120 s, the simulation's rate).
         method : str
             ``"zoh"``, ``"euler"`` or ``"step"`` (the model of the simulation step, at its
-            ``dt_s`` only; see :func:`fdi_sim.linear.transform.discretize`).
+            ``dt_s`` or a multiple of it; see :func:`fdi_sim.linear.transform.discretize`).
         interpolate : bool
             Blend the enclosing triangle's models instead of taking the nearest.
         max_distance : float

@@ -127,7 +127,8 @@ def step_model(model: LinearModel, dt_s: float | None = None, tol: float = DELAY
     model : LinearModel
         Continuous model with step terms (``model.step``), from the linearizer.
     dt_s : float, optional
-        Must equal ``model.step.dt_s`` (the step the terms were measured at) [s].
+        ``model.step.dt_s`` (the step the terms were measured at; the default) or a multiple of it,
+        which gives the step model sampled every so many steps with the input held (:func:`lift`) [s].
     tol : float
         Delayed increments below this fraction of their column are merged (see
         :func:`delay_increments`).
@@ -153,9 +154,12 @@ def step_model(model: LinearModel, dt_s: float | None = None, tol: float = DELAY
                           "(fdi_sim.linear.linearize.linearize does by default); a model whose A or B was "
                           "changed afterwards has none (LinearModel.step)")
     h = st.dt_s if dt_s is None else float(dt_s)
-    if abs(h - st.dt_s) > 1e-12:
-        raise DesignError(f"the step model exists only at the simulation step {st.dt_s:g} s (asked {h:g} s); "
-                          "use method='zoh' at other rates")
+    n_lift = round(h / st.dt_s)
+    if n_lift < 1 or abs(h - n_lift * st.dt_s) > 1e-9 * h:
+        raise DesignError(f"the step model exists at multiples of the simulation step {st.dt_s:g} s (asked {h:g} s); "
+                          "use a multiple, or method='zoh' at other rates")
+    if n_lift > 1:  # the model of the simulation step, sampled every n_lift steps (input held)
+        return lift(step_model(model, st.dt_s, tol), n_lift)
     nr, n, m = st.n_rigid, model.n_states, model.n_inputs
     ne = n - nr
     lag = [model.output_names.index(o) for o in st.lagged_outputs]
@@ -244,6 +248,40 @@ def step_model(model: LinearModel, dt_s: float | None = None, tol: float = DELAY
     )
 
 
+def lift(model_d: LinearModel, n: int) -> LinearModel:
+    """The discrete model ``model_d`` sampled every ``n`` steps with the input held over each block.
+
+    With the timing convention of :mod:`fdi_sim.linear.validate` (``u_k`` set before step ``k``,
+    ``y_k = C x_k + D u_k`` read after it, ``x_{k+1} = A x_k + B u_k``), a detector that sets
+    ``u_j`` at the start of block ``j`` (simulation step ``jn``) and reads the outputs after the
+    block's last step (``jn + n - 1``) sees, with ``xi_j = x_{jn}`` and ``S_m = sum_{i<m} A^i``::
+
+        xi_{j+1} = A^n xi_j + S_n B u_j,    y_j = C A^(n-1) xi_j + (C S_(n-1) B + D) u_j
+
+    This is exact for the step model at any multiple of the simulation step, where a continuous
+    model discretized by ZOH carries the continuous model's error at every rate.
+
+    Raises
+    ------
+    DesignError
+        A continuous model or ``n < 1``.
+    """
+    if not model_d.is_discrete:
+        raise DesignError("lift needs a discrete model")
+    if n < 1:
+        raise DesignError(f"lift: n = {n} must be a positive number of steps")
+    if n == 1:
+        return model_d
+    A, B = model_d.A, model_d.B
+    An1 = np.eye(A.shape[0])
+    Sn1 = np.zeros_like(A)
+    for _ in range(n - 1):  # after the loop An1 = A^(n-1), Sn1 = S_(n-1)
+        Sn1 = Sn1 + An1
+        An1 = A @ An1
+    return replace(model_d, A=A @ An1, B=(Sn1 + An1) @ B, C=model_d.C @ An1, D=model_d.C @ Sn1 @ B + model_d.D,
+                   dt_s=n * model_d.dt_s, meta={**model_d.meta, "lifted_steps": n})
+
+
 def equivalent_poles(model_d: LinearModel, min_abs_z: float = 0.3) -> NDArray[np.complex128]:
     """Continuous-time equivalents ``ln(z) / dt`` of the poles of a discrete model [1/s].
 
@@ -263,5 +301,5 @@ def strip(model: LinearModel) -> LinearModel:
     return model if model.step is None else replace(model, step=None)
 
 
-__all__ = ["AB3", "DELAY_TOL", "StepTerms", "delay_increments", "engine_in_pass", "equivalent_poles", "step_model",
-           "strip"]
+__all__ = ["AB3", "DELAY_TOL", "StepTerms", "delay_increments", "engine_in_pass", "equivalent_poles", "lift",
+           "step_model", "strip"]

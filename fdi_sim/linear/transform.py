@@ -32,8 +32,9 @@ def discretize(model: LinearModel, dt_s: float = DEFAULT_DT_S, method: str = "zo
         ``"zoh"`` (zero-order hold, exact for a held input; the default), ``"euler"``
         (``A_d = I + dt A``, ``B_d = dt B``) or ``"step"``: the discrete model of JSBSim's own
         step (:func:`fdi_sim.linear.step.step_model`: AB3 integration, one-pass delays of the FCS
-        and of the aero model, engines inside the pass, accelerometers one step late), only at
-        the simulation step and only for models with step terms; it has more states. fdi-sim runs JSBSim with third-order Adams-Bashforth
+        and of the aero model, engines inside the pass, accelerometers one step late), at the
+        simulation step or a multiple of it (:func:`fdi_sim.linear.step.lift`), only for models
+        with step terms; it has more states. fdi-sim runs JSBSim with third-order Adams-Bashforth
         on all four integrators (``Aircraft.__init__``); with it the ZOH model follows the
         simulation at its own step (DHC-6 5000 ft / 120 KCAS doublets without the throttle run:
         ``p_radps`` error 1.6 % with ZOH, 14.7 % with Euler). ``"euler"`` matches JSBSim's

@@ -155,8 +155,10 @@ def test_step_terms_round_trip_and_lookup(tmp_path: Path) -> None:
     want = step_model(s2.continuous(4))
     assert got.dt_s == pytest.approx(1 / 120) and got.state_names == want.state_names
     np.testing.assert_array_equal(got.A, want.A)
-    with pytest.raises(DesignError, match="only at the simulation step"):
+    with pytest.raises(DesignError, match="multiples of the simulation step"):
         s2.model_at(op, dt_s=0.02, method="step")
+    at20 = s2.model_at(op, dt_s=0.05, method="step").model  # six simulation steps per sample
+    np.testing.assert_allclose(at20.A, np.linalg.matrix_power(want.A, 6), rtol=1e-9, atol=1e-12)
     plain = ModelSchedule.load(make_schedule().save(tmp_path / "plain.npz"))
     assert not plain.has_step and plain.continuous(4).step is None
     with pytest.raises(DesignError, match="no step terms"):

@@ -13,7 +13,7 @@ from scipy.linalg import expm
 
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel, StepTerms
-from fdi_sim.linear.step import AB3, delay_increments, equivalent_poles, step_model
+from fdi_sim.linear.step import AB3, delay_increments, equivalent_poles, lift, step_model
 from fdi_sim.linear.transform import discretize, select
 from fdi_sim.linear.validate import simulate_linear
 
@@ -178,8 +178,10 @@ def test_step_terms_do_not_survive_a_change_of_a_or_b() -> None:
 
 def test_bad_input() -> None:
     model = _model(np.random.default_rng(7), 2)
-    with pytest.raises(DesignError, match="only at the simulation step"):
-        discretize(model, 0.02, method="step")
+    with pytest.raises(DesignError, match="multiples of the simulation step"):
+        discretize(model, 0.02, method="step")  # 2.4 steps
+    with pytest.raises(DesignError, match="positive number of steps"):
+        lift(step_model(model), 0)
     with pytest.raises(DesignError, match="no step terms"):
         step_model(LinearModel(A=model.A, B=model.B, C=model.C, D=model.D))
     with pytest.raises(DesignError, match="continuous model"):
@@ -189,3 +191,20 @@ def test_bad_input() -> None:
                     step=model.step)
     with pytest.raises(ValueError, match="not model outputs"):
         LinearModel(A=model.A, B=model.B, C=model.C, D=model.D, step=model.step)
+
+
+@pytest.mark.parametrize("n", [1, 2, 6])
+def test_lifted_step_model_is_the_step_model_read_every_n_steps(n: int) -> None:
+    """A detector at n simulation steps holds its input over a block and reads the outputs after
+    the block's last step: the lifted model gives exactly the fine model's outputs there."""
+    rng = np.random.default_rng(3 + n)
+    model = _model(rng, 3, 2)
+    fine = step_model(model)
+    blocks = 60
+    Ub = rng.normal(size=(blocks, model.n_inputs)) * 0.2
+    y_fine = simulate_linear(fine, np.repeat(Ub, n, axis=0))
+    lifted = discretize(model, n * H, method="step")
+    assert lifted.dt_s == pytest.approx(n * H) and lifted.n_states == fine.n_states
+    np.testing.assert_allclose(simulate_linear(lifted, Ub), y_fine[n - 1::n], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(np.sort(np.abs(np.linalg.eigvals(lifted.A))),
+                               np.sort(np.abs(np.linalg.eigvals(fine.A)) ** n), atol=1e-9)
