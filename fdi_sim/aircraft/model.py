@@ -188,6 +188,39 @@ class Aircraft:
 
         return read
 
+    def list_reader(self, names: Sequence[str]) -> Callable[[], list[float]]:
+        """A faster closure returning the named signals as a new list of Python floats.
+
+        The same values as :meth:`reader`, bit for bit (a summed signal is ``sum`` of its parts, as
+        there). One ``map`` of the unbound node getter over the cached nodes: about 1.8 us for the
+        29 truth signals against 4.7 us for :meth:`reader` (numpy.fromiter over a generator).
+        """
+        nodes: list[object] = []
+        sums: list[tuple[int, int]] = []  # summed signals: (first, end) index into the flat reads
+        for name in names:
+            if name not in self._map:
+                raise KeyError(f"unknown signal {name!r} for {self.name}")
+            props = self._map[name]
+            props = (props,) if isinstance(props, str) else props
+            if len(props) > 1:
+                sums.append((len(nodes), len(nodes) + len(props)))
+            nodes.extend(self.node(p) for p in props)
+        get = jsbsim.FGPropertyNode.get_double_value
+        if not sums:
+            def read() -> list[float]:
+                return list(map(get, nodes))
+            return read
+        # rebuild the output from the flat reads: summed signals back to front so indexes hold
+        plan = sorted(sums, reverse=True)
+
+        def read_summed() -> list[float]:
+            v = list(map(get, nodes))
+            for a, b in plan:
+                v[a:b] = [sum(v[a:b])]
+            return v
+
+        return read_summed
+
     def read(self, names: Sequence[str]) -> NDArray[np.float64]:
         """Read the named signals once (slow path; use :meth:`reader` in loops)."""
         return self.reader(names)()

@@ -270,10 +270,10 @@ class FaultInjector:
                 self.events.append((t_s, {"event": "onset" if f.onset else "clear", "label": f.label,
                                           "type": f.d.type_id, "target": f.d.target}))
 
-    def sensors(self, t_s: float, k: int, y: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Faulty measurements from the healthy ones ``y`` and the truth ``x``.
+    def sensors(self, t_s: float, k: int, y: Any, x: Any) -> Any:
+        """Faulty measurements from the healthy ones ``y`` and the truth ``x`` (arrays or lists of floats).
 
-        ``y`` is changed in place (the suite returns a new array every step) and returned.
+        ``y`` is changed in place (the suite returns a new array or list every step) and returned.
         """
         for f in self._sensor:
             c = f.c
@@ -297,7 +297,7 @@ class FaultInjector:
             c["last"] = c["out"]
         return y
 
-    def _sensor_value(self, f: _Bound, t_s: float, yh: float, x: np.ndarray, onset: bool) -> float:
+    def _sensor_value(self, f: _Bound, t_s: float, yh: float, x: Any, onset: bool) -> float:
         c, w, law = f.c, f.level, f.law
         if law == "bias":
             return yh + w * c["bias"]
@@ -355,8 +355,8 @@ class FaultInjector:
                 c["throttle"](self._throttle * (1.0 - w * c["loss"]))
                 f.error = w * c["loss"]
 
-    def plant(self, t_s: float, x: np.ndarray) -> None:
-        """Surfaces, engines and icing for the coming JSBSim step."""
+    def plant(self, t_s: float, x: Any) -> None:
+        """Surfaces, engines and icing for the coming JSBSim step (``x``: truth, array or list of floats)."""
         for f in self._plant:
             c, w = f.c, f.level
             fam = f.d.family

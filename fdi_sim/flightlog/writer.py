@@ -266,7 +266,8 @@ class VectorChannel:
         t_s : float
             Simulated time [s], finite, >= 0; log_time = publish_time = round(t_s * 1e9) ns.
         values : 1-D float array or sequence
-            ``len(fields) - 1`` values in field order, without ``t_s``. Copied.
+            ``len(fields) - 1`` values in field order, without ``t_s``. Copied. A fresh
+            float64 array, a tuple or a list of floats take the fast path.
         """
         # the common cases inline (a time in the current flush window; a fresh float64 array
         # or a tuple of floats); everything else, and every error, through the general checks
@@ -279,7 +280,7 @@ class VectorChannel:
         kind = type(values)
         if kind is _NDARRAY and values.dtype is _F8_LE and values.shape == self._shape:
             b = values.tobytes()
-        elif kind is tuple:
+        elif kind is tuple or kind is list:
             try:
                 b = self._pack(*values)
             except (struct.error, TypeError):

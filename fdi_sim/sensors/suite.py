@@ -142,15 +142,31 @@ class SensorSuite:
 
     def step(self, t_s: float, truth: NDArray[np.float64]) -> Measurement:
         """Measure the truth vector at time ``t_s`` [s]."""
+        return Measurement(t_s, np.array(self.step_list(t_s, truth.tolist())))
+
+    def step_list(self, t_s: float, truth: list[float]) -> list[float]:
+        """:meth:`step` on Python floats (the simulation loop's fast path).
+
+        Parameters
+        ----------
+        t_s : float
+            Time [s].
+        truth : list of float
+            The truth vector in ``truth_names`` order.
+
+        Returns
+        -------
+        list of float
+            A new list in :attr:`names` order (the caller may change it).
+        """
         k = int(round(t_s / self.dt_s))
         j = k - self._block_start
         if not 0 <= j < BLOCK_STEPS:
             self._fill_block(k)
             j = 0
-        x = truth.tolist()
         off = self._offset[j]
         y = self._y
         for i, ti, q in self._plan[k % self._period]:
-            v = x[ti] + off[i]
+            v = truth[ti] + off[i]
             y[i] = round(v / q) * q if q else v  # sample, then hold until the next sample
-        return Measurement(t_s, np.array(y))
+        return y[:]

@@ -245,8 +245,10 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     """The per-step loop; returns (status, reason, last t_s, steps, max deviations)."""
     ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
     ch_ftruth, ch_fevents, ch_valid = fault_channels if fault_channels else (None, None, None)
-    read_truth = ac.reader(TRUTH_SIGNALS)
-    read_surf = ac.reader(SURFACE_SIGNALS)
+    # Python floats end to end: lists in, struct-packed rows out (no numpy call per step)
+    read_truth = ac.list_reader(TRUTH_SIGNALS)
+    read_surf = ac.list_reader(SURFACE_SIGNALS)
+    measure = sensors.step_list
     write_cmd = ac.command_writer()
     idx = {n: i for i, n in enumerate(TRUTH_SIGNALS)}
     i_h, i_vc, i_vt, i_phi, i_alpha, i_mach = idx["h_ft"], idx["vc_kts"], idx["vt_fps"], idx["phi_rad"], idx["alpha_rad"], idx["mach"]
@@ -273,11 +275,10 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     try:
         for k in range(n_steps + 1):
             t_s = k * dt
-            x = read_truth()
+            xl = read_truth()
             # --- divergence checks on the truth (NaN, ground, departure) -------------------------
-            xl = x.tolist()  # scalar reads below from a list: numpy scalar indexing costs more per read
             if not math.isfinite(sum(xl)):  # one NaN or inf makes the sum non-finite
-                bad = [TRUTH_SIGNALS[i] for i in np.flatnonzero(~np.isfinite(x))[:3]]
+                bad = [TRUTH_SIGNALS[i] for i in np.flatnonzero(~np.isfinite(np.array(xl)))[:3]]
                 raise SimulationDiverged(t_s, f"non-finite state ({', '.join(bad)})")
             if h_agl_node() <= 0.0:
                 raise SimulationDiverged(t_s, "ground impact")
@@ -289,18 +290,18 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 raise SimulationDiverged(t_s, f"body rate beyond {rate_max} rad/s")
             if xl[i_vc] < vc_min:
                 raise SimulationDiverged(t_s, f"airspeed {xl[i_vc]:.1f} kt below {vc_min}")
-            y = sensors.step(t_s, x).y
+            y = measure(t_s, xl)
             if inj is None:
                 cmd = pilot.step(t_s, y)
                 write_cmd(cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm)
             else:  # faults: sensors -> pilot -> commands -> plant (surfaces, engines, icing)
                 inj.begin_step(t_s)
-                y = inj.sensors(t_s, k, y, x)
+                y = inj.sensors(t_s, k, y, xl)
                 cmd = pilot.step(t_s, y)
                 write_cmd(*inj.commands(t_s, cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm,
                                         cmd.throttle_cmd_norm))
                 inj.after_commands()
-                inj.plant(t_s, x)
+                inj.plant(t_s, xl)
                 eta = inj.icing_eta
             # --- statistics: deviation from the references (airspeed relative to the steady air) --
             v_air = math.sqrt((xl[i_vn] - wn) ** 2 + (xl[i_ve] - we) ** 2 + xl[i_vd] ** 2)
@@ -314,7 +315,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
             if dphi > max_dphi:
                 max_dphi = dphi
             # --- log ------------------------------------------------------------------------
-            ch_truth.write(t_s, x)
+            ch_truth.write(t_s, xl)
             ch_meas.write(t_s, y)
             if inj is not None:
                 ch_ftruth.write(t_s, inj.truth_row())
