@@ -57,8 +57,9 @@ from __future__ import annotations
 
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 from numpy.typing import NDArray
@@ -224,6 +225,20 @@ class _StateSpace:
         self.run()
 
 
+@contextmanager
+def _integration_suspended(ac: Aircraft) -> Iterator[None]:
+    """FGLinearization's dt = 0 for the block; afterwards trim status off, integration on, dt restored."""
+    fdm = ac.fdm
+    fdm.suspend_integration()
+    try:
+        yield
+    finally:
+        fdm.set_trim_status(False)
+        if fdm.integration_suspended():
+            fdm.resume_integration()
+        fdm.set_dt(ac.dt_s)
+
+
 def _jacobian(ss: _StateSpace, x0: NDArray[np.float64], u0: NDArray[np.float64], wrt: tuple[str, ...],
               h: float) -> NDArray[np.float64]:
     """``numericalJacobian`` of the state derivatives with respect to ``wrt`` (X_NAMES or U_NAMES)."""
@@ -281,16 +296,9 @@ def fglin_replica(ac: Aircraft, n_runs: int | None = None, h: float = 1e-4,
     ss = _StateSpace(ac, n_runs, after_pass)
     x0 = np.array([ss.get(n) for n in X_NAMES])
     u0 = np.array([ss.get(n) for n in U_NAMES])
-    fdm = ac.fdm
-    fdm.suspend_integration()
-    try:
+    with _integration_suspended(ac):
         A = _jacobian(ss, x0, u0, X_NAMES, h)
         B = _jacobian(ss, x0, u0, U_NAMES, h)
-    finally:
-        fdm.set_trim_status(False)
-        if fdm.integration_suspended():
-            fdm.resume_integration()
-        fdm.set_dt(ac.dt_s)
     return ReplicaLinearization(A=A, B=B, x_names=X_NAMES, u_names=U_NAMES, x0=x0, u0=u0, n_runs=n_runs,
                                 runs_used=(ss.runs_min, ss.runs_max), n_evaluations=ss.n_eval,
                                 elapsed_s=time.perf_counter() - t0)
@@ -325,14 +333,8 @@ def pass_history(ac: Aircraft, name: str, delta: float, props: tuple[str, ...], 
     rows: list[list[float]] = []
     ss = _StateSpace(ac, n_runs)
     x0 = np.array([ss.get(n) for n in X_NAMES])
-    ac.fdm.suspend_integration()
-    try:
+    with _integration_suspended(ac):
         ss.set_all(X_NAMES, x0)  # settle at x0 first
         ss.after_pass = lambda k: rows.append([float(ac.fdm[p]) for p in props])
         ss.set_one(name, ss.get(name) + delta)
-    finally:
-        ac.fdm.set_trim_status(False)
-        if ac.fdm.integration_suspended():
-            ac.fdm.resume_integration()
-        ac.fdm.set_dt(ac.dt_s)
     return np.array(rows)

@@ -36,7 +36,9 @@ from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, PassJacobians,
 from fdi_sim.aircraft.linearize_response import N1_PROBE, STATE_PROBES, slope_jumps
 from fdi_sim.aircraft.fglin_replica import ReplicaLinearization, fglin_replica
 from fdi_sim.aircraft.linearize_fglin import JsbsimLinearization, fglinearization
-from fdi_sim.aircraft.linearize_state import LAGGED_OUTPUTS, TrimState, capture_trim, has_propeller
+from fdi_sim.aircraft.linearize_state import (
+    CONTROL_INPUTS, GUST_INPUTS, LAGGED_OUTPUTS, TrimState, capture_trim, has_propeller,
+)
 from fdi_sim.aircraft.model import AIRCRAFT, Aircraft
 from fdi_sim.aircraft.trim import TrimResult, trim
 from fdi_sim.errors import DesignError, TrimError
@@ -353,18 +355,27 @@ def _point_info(ac: Aircraft, lp: LinearizedPoint, validation: ValidationSetting
         runs = fly_doublets(ac, lp.trim_state, default_doublets(m, validation), m.output_names, validation.duration_s)
         usable = [meth for meth in methods if meth != "step" or m.step is not None]
         models = {meth: discretize(m, ac.dt_s, method=meth) for meth in usable}
-        info["validation"] = {meth: _validation_info(compare(md, runs)) for meth, md in models.items()}
+        info.update(_validations(ac, m, models, runs))
         if "step" in models:
             info["step_states"] = models["step"].n_states
-        if runs.engine_lag is not None:  # turboprop: N1 row replaced by the identified lag
-            meth = "step" if m.step is not None else "zoh"
-            md = models.get(meth) or discretize(m, ac.dt_s, method=meth)
-            info[ENGINE_LAG_KEY] = {**_validation_info(compare(md, runs, engine_lag=True)), "method": meth}
+        if runs.engine_lag is not None:
             info["engine_lag"] = {"tau_up_s": runs.engine_lag.tau_up_s, "tau_down_s": runs.engine_lag.tau_down_s}
         info["nonsmooth"] = nonsmooth(ac, lp.trim_state, runs, m)
         info["linear_range"] = _linear_range_info(ac, lp, runs, info, models)
         info["timing_s"]["validate"] = time.perf_counter() - t0
     return info
+
+
+def _validations(ac: Aircraft, model: LinearModel, models: dict[str, LinearModel], runs: DoubletRuns
+                 ) -> dict[str, Any]:
+    """``validation`` (per discretization in ``models``) and, for turboprops, :data:`ENGINE_LAG_KEY`:
+    the step model (ZOH without step terms) with its N1 row replaced by the identified lag."""
+    out: dict[str, Any] = {"validation": {meth: _validation_info(compare(md, runs)) for meth, md in models.items()}}
+    if runs.engine_lag is not None:
+        meth = "step" if model.step is not None else "zoh"
+        md = models.get(meth) or discretize(model, ac.dt_s, method=meth)
+        out[ENGINE_LAG_KEY] = {**_validation_info(compare(md, runs, engine_lag=True)), "method": meth}
+    return out
 
 
 def _linear_range_info(ac: Aircraft, lp: LinearizedPoint, runs: DoubletRuns, info: dict[str, Any],
@@ -387,11 +398,7 @@ def _linear_range_info(ac: Aircraft, lp: LinearizedPoint, runs: DoubletRuns, inf
             out[ENGINE_LAG_KEY] = info[ENGINE_LAG_KEY]
         return out
     out["nonsmooth"] = nonsmooth(ac, lp.trim_state, lr.runs, lp.model)
-    out["validation"] = {meth: _validation_info(compare(md, lr.runs)) for meth, md in models.items()}
-    if ENGINE_LAG_KEY in info:
-        meth = info[ENGINE_LAG_KEY]["method"]
-        md = models.get(meth) or discretize(lp.model, ac.dt_s, method=meth)
-        out[ENGINE_LAG_KEY] = {**_validation_info(compare(md, lr.runs, engine_lag=True)), "method": meth}
+    out.update(_validations(ac, lp.model, models, lr.runs))
     return out
 
 
@@ -419,8 +426,6 @@ class LinearRangeRuns:
 
 def _run_excursions(runs: DoubletRuns, model: LinearModel | None = None) -> list[dict[str, float]]:
     """Per run, how far it moves each probe: its own input (the amplitude), the states and N1 [units of the probe]."""
-    from fdi_sim.aircraft.linearize_state import CONTROL_INPUTS, GUST_INPUTS
-
     out = []
     n1 = n1_excursions(runs, model)
     for r, d in enumerate(runs.doublets):
@@ -444,7 +449,9 @@ def linear_range_runs(ac: Aircraft, ts: TrimState, runs: DoubletRuns, jumps: dic
     tangent changes, so a doublet that crosses one tests the model outside the range where any
     linear model can hold. For every probe (input or state, :func:`nonsmooth`) whose slope jump
     over the configured excursion ``a`` is at least ``jump_bar``, the smooth radius is the first
-    of ``a/2, a/4, ...`` (at most ``max_halvings``) with the jump below the bar; each run whose
+    of ``a/2, a/4, ...`` (at most ``max_halvings``) with the jump below the bar (probed alone, so
+    judged on every row it drives substantially: at least the rows of the joint probe of
+    :func:`nonsmooth`, which can only make the radius smaller); each run whose
     excursion of that probe exceeds the radius is flown again with its amplitude scaled by
     ``radius / excursion`` (the responses are linear in the amplitude to first order).
 
@@ -540,21 +547,11 @@ def nonsmooth(ac: Aircraft, ts: TrimState, runs: DoubletRuns, model: LinearModel
     dict
         ``probe -> {"excursion": a, "jump": relative slope jump}`` [units of the probe, -].
     """
-    probes = {name: float(np.max([e.get(name, 0.0) for e in _run_excursions(runs, model)]))
-              for name in _probe_names(runs, model)}
+    exc = _run_excursions(runs, model)
+    names = dict.fromkeys(n for e in exc for n in e if n != "throttle_cmd_norm")  # the throttle's probe is N1
+    probes = {n: max(e.get(n, 0.0) for e in exc) for n in names}
     jumps = slope_jumps(ac, ts, probes)
     return {k: {"excursion": float(probes[k]), "jump": v} for k, v in jumps.items()}
-
-
-def _probe_names(runs: DoubletRuns, model: LinearModel | None) -> list[str]:
-    from fdi_sim.aircraft.linearize_state import CONTROL_INPUTS, GUST_INPUTS
-
-    names = [d.input_name for d in runs.doublets
-             if d.input_name in CONTROL_INPUTS + GUST_INPUTS and d.input_name != "throttle_cmd_norm"]
-    names += [n for n in STATE_PROBES if n in runs.output_names]
-    if np.any(n1_excursions(runs, model) > 0):
-        names.append(N1_PROBE)
-    return names
 
 
 #: discretizations validated by :func:`linearize_grid` by default: the detectors' ZOH model and the

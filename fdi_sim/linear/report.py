@@ -33,9 +33,12 @@ def _fmt(x: Any, spec: str = ".3g") -> str:
     return format(x, spec)
 
 
-def _speed(p: SchedulePoint) -> str:
+def _point_cell(p: SchedulePoint) -> str:
+    """A table's point column: altitude, speed and, where set, flaps and icing (iced grids repeat the rest)."""
     op = p.op
-    return f"{op.vt_kts:g} KTAS" if op.vt_kts is not None else f"{op.vc_kts:g} KCAS"
+    speed = f"{op.vt_kts:g} KTAS" if op.vt_kts is not None else f"{op.vc_kts:g} KCAS"
+    return (f"{op.h_ft:g} ft {speed}" + (f" flaps {op.flaps_deg:g}" if op.flaps_deg else "")
+            + (f" eta {op.icing_eta:g}" if op.icing_eta else ""))
 
 
 def _mode_cell(modes: Sequence[dict[str, Any]], name: str) -> str:
@@ -49,7 +52,6 @@ def _mode_cell(modes: Sequence[dict[str, Any]], name: str) -> str:
         else:
             cells.append(f"τ {m['tau_s']:.3g} s" if m["re"] < 0 else f"T2 {-m['tau_s'] * math.log(2):.3g} s (unstable)")
     return "; ".join(cells)
-
 
 
 #: the pseudo-method of the bar's own validation (:func:`bar_entry`)
@@ -170,8 +172,7 @@ def _validation_table(schedule: ModelSchedule, method: str) -> list[str]:
         err = np.array(v["nrmse_pair"], dtype=float) * np.array(v["rms_nl"], dtype=float)
         jo = outs.index(v["worst_output"])
         run = v["input_names"][int(np.argmax(np.where(np.isfinite(err[:, jo]), err[:, jo], -1)))]
-        lines.append(f"| {p.op.h_ft:g} ft {_speed(p)}{f' f{p.op.flaps_deg:g}' if p.op.flaps_deg else ''} "
-                     f"| {v['worst_output']} | {v['worst']:.1%} | {run} | "
+        lines.append(f"| {_point_cell(p)} | {v['worst_output']} | {v['worst']:.1%} | {run} | "
                      f"{v['worst_output_without_throttle']} {v['worst_without_throttle']:.1%} | " +
                      " | ".join(f"{x * 100:.1f}" for x in v["nrmse"]) + " |")
     return lines + [""]
@@ -183,7 +184,7 @@ def reduced_doublets(p: SchedulePoint) -> list[str]:
     lr = p.info.get("linear_range") or {}
     for name, r in lr.get("reduced", {}).items():
         out.append(f"{name} x{r['factor']:.2g} ({r['by']}: slopes differ by {r['jump']:.0%} across the configured "
-                   f"doublet, by less than {NONSMOOTH_JUMP:.0%} within +-{r['radius']:.2g})")
+                   f"doublets' excursion, by less than {NONSMOOTH_JUMP:.0%} within +-{r['radius']:.2g})")
     for name, j in lr.get("no_smooth_range", {}).items():
         out.append(f"{name}: kink at the trim itself (slopes differ by {j:.0%} however small the excursion)")
     return out
@@ -267,8 +268,7 @@ def format_report(schedule: ModelSchedule, figure: str | None = None) -> str:
     for p in ok:
         m = p.info.get("modes", [])
         lines.append(
-            f"| {p.op.h_ft:g} ft {_speed(p)}{f' flaps {p.op.flaps_deg:g}' if p.op.flaps_deg else ''} "
-            f"| {math.degrees(p.trim['alpha_rad']):.2f} | {p.trim['throttle_cmd_norm']:.3f} "
+            f"| {_point_cell(p)} | {math.degrees(p.trim['alpha_rad']):.2f} | {p.trim['throttle_cmd_norm']:.3f} "
             f"| {_mode_cell(m, 'short period')} | {_mode_cell(m, 'phugoid')} | {_mode_cell(m, 'dutch roll')} "
             f"| {_mode_cell(m, 'roll')} | {_mode_cell(m, 'spiral')} |")
     if ok:
@@ -296,10 +296,10 @@ def format_report(schedule: ModelSchedule, figure: str | None = None) -> str:
         if bar:
             lines += [f"'bar: {method_label(BAR, schedule)}' is the table the bar is judged on: each doublet that carries "
                       "JSBSim across a kink of its tables (a slope jump of at least "
-                      f"{NONSMOOTH_JUMP:.0%} within its excursion, of its own input or of alpha, beta, p, q, r) "
-                      "is flown again with its amplitude scaled to the largest excursion without one "
-                      "(fdi_sim.linear.linearize.linear_range_runs). The other tables keep the configured "
-                      "doublets.", ""]
+                      f"{NONSMOOTH_JUMP:.0%} within its excursion, of its own input or of alpha, beta, p, q, r "
+                      "or N1) is flown again with its amplitude scaled to the excursion, found by halving, "
+                      "without one (fdi_sim.linear.linearize.linear_range_runs). The other tables keep the "
+                      "configured doublets.", ""]
         for meth in (*bar, *methods, *lag):
             lines += _validation_table(schedule, meth)
     fg = [p for p in ok if "fglin" in p.info]
@@ -324,7 +324,7 @@ def format_report(schedule: ModelSchedule, figure: str | None = None) -> str:
             cells = (f"{sim['ours_vs_sim'][roll[0]]:.2%} | {sim['fglin_vs_sim'][roll[0]]:.2%}" if roll else "- | -")
             settled = p.info["fglin"].get("settled")
             sc = f"{settled['max_rel']:.1e}" if settled else "-"
-            lines.append(f"| {p.op.h_ft:g} ft {_speed(p)} | {p.info['fglin']['max_rel']:.2%} | {wm} ({pm.get(wm, 0):.2%}) "
+            lines.append(f"| {_point_cell(p)} | {p.info['fglin']['max_rel']:.2%} | {wm} ({pm.get(wm, 0):.2%}) "
                          f"| {sc} | {cells} |")
         lines.append("")
     lines += ["## Points without a model", ""]

@@ -1,6 +1,8 @@
 """The schedule report: pass counts, worst point and output, both validations of the DHC-6 throttle."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from fdi_sim.linear.report import BAR, ENGINE_LAG_KEY, bar_entry, bar_method, format_report, nonsmooth_causes, worst_validation
@@ -54,6 +56,16 @@ def test_report_shows_both_validations_with_pass_counts() -> None:
     assert "### zoh\n" in text and "### zoh with the identified N1 lag\n" in text
     assert "| 5000 ft 120 KCAS | nx_g | 6.7% | throttle_cmd_norm |" in text  # the run the worst error comes from
     assert "throttle_cmd_norm = 1.000 at its limit" in text  # points without a model keep their reason
+
+
+def test_table_rows_name_flaps_and_icing() -> None:
+    """Iced and flapped grids repeat altitude and speed: the rows must tell their points apart."""
+    s = _schedule()
+    pts = list(s.points)
+    pts[1] = replace(pts[1], op=OperatingPoint("DHC6", 5000.0, vc_kts=120.0, flaps_deg=10.0, icing_eta=0.05))
+    text = format_report(ModelSchedule(s.aircraft, pts, {}, s.names, s.meta))
+    assert "| 5000 ft 120 KCAS flaps 10 eta 0.05 | nx_g | 6.7% |" in text
+    assert "| 5000 ft 100 KCAS | nx_g |" in text
 
 
 def test_report_without_engine_lag_has_no_such_section() -> None:
@@ -117,6 +129,6 @@ def test_bar_reads_the_linear_range_validation_and_lists_the_smaller_doublets() 
     text = format_report(s)
     assert "**2/2 points pass**" in text
     assert ("    - DHC6 h=5000 ft VC=120 kt: throttle_cmd_norm x0.25 (alpha_rad: slopes differ by 12% across the "
-            "configured doublet, by less than 5% within +-0.001)") in text
+            "configured doublets' excursion, by less than 5% within +-0.001)") in text
     assert "### bar: step with the identified N1 lag, doublets inside the smooth range" in text
     assert worst_validation(s, BAR) == ("DHC6 h=5000 ft VC=120 kt", "h_ft", np.sqrt((0.01**2 + 0.04**2) / 2))
