@@ -1,7 +1,7 @@
 """The command line: exit codes, messages without tracebacks, and the log commands on real files."""
 from __future__ import annotations
 
-import os
+import json
 import signal
 import subprocess
 import sys
@@ -9,8 +9,10 @@ import time
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 
 from fdi_sim.cli import main
+from fdi_sim.errors import LogError
 from fdi_sim.flightlog import read_log
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,6 +25,7 @@ def test_run_info_plugins_scenarios(tmp_path: Path, capsys: pytest.CaptureFixtur
     out = capsys.readouterr().out
     assert "status     completed" in out and "log " in out
     log = next(tmp_path.glob("*.mcap"))
+    _check_with_the_mcap_reader(log)
     assert main(["info", str(log)]) == 0
     info = capsys.readouterr().out
     assert "/truth/state" in info and "t_f16" in info
@@ -33,12 +36,36 @@ def test_run_info_plugins_scenarios(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert all(p.stem in listing for p in (ROOT / "scenarios").glob("*.toml"))
 
 
+def _check_with_the_mcap_reader(log: Path) -> None:
+    """A real run's log through the standard ``mcap`` reader, CRCs checked: every ros2msg channel
+    holds CDR_LE messages of 4 + 8 bytes per ``float64`` line of its schema, every JSON channel
+    parses, and the counts agree with the summary and with our reader."""
+    counts: dict[str, int] = {}
+    with open(log, "rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        summary = reader.get_summary()
+        for schema, channel, msg in reader.iter_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if schema.encoding == "ros2msg":
+                assert channel.message_encoding == "cdr"
+                lines = schema.data.decode().splitlines()
+                assert all(line.startswith("float64 ") for line in lines)
+                assert msg.data[:4] == b"\x00\x01\x00\x00" and len(msg.data) == 4 + 8 * len(lines)
+            else:
+                assert (schema.encoding, channel.message_encoding) == ("jsonschema", "json")
+                assert json.loads(schema.data)["type"] == "object"
+                assert isinstance(json.loads(msg.data), dict)
+    assert sum(counts.values()) == summary.statistics.message_count > 0
+    assert counts == read_log(log).message_counts
+
+
 @pytest.mark.parametrize("args,needle", [
     (["run", "scenarios/does_not_exist.toml"], "no such file"),
     (["info", "pyproject.toml"], "not an MCAP"),
 ])
-def test_bad_input_exit_2_one_paragraph(capsys: pytest.CaptureFixture[str], args: list[str], needle: str) -> None:
-    os.chdir(ROOT)
+def test_bad_input_exit_2_one_paragraph(capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+                                        args: list[str], needle: str) -> None:
+    monkeypatch.chdir(ROOT)
     assert main(args) == 2
     err = capsys.readouterr().err
     assert needle in err and "Traceback" not in err
@@ -54,6 +81,21 @@ def test_typo_key_and_untrimmable_point(tmp_path: Path, capsys: pytest.CaptureFi
     dhc.write_text(f16_text.replace('"f16"', '"DHC6"').replace("h_ft = 10000.0", "h_ft = 5000.0").replace("vt_kts = 400.0", "vc_kts = 150.0"))
     assert main(["run", str(dhc), "--out", str(tmp_path)]) == 2
     assert "cannot trim DHC6" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("section,key", [
+    ('[sensors]\nsuite = "defualt"', "sensors.suite: no sensor suite 'defualt' for f16"),
+    ("[sensors.overrides.alpah_rad]\nnoise_std = 0.1", "sensors.overrides.alpah_rad: no such sensor"),
+])
+def test_bad_sensor_section_exit_2_before_the_run(tmp_path: Path, capsys: pytest.CaptureFixture[str], f16_text: str,
+                                                  section: str, key: str) -> None:
+    """A sensor-suite typo escaped as a FileNotFoundError traceback after the trim."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text(f16_text + section)
+    assert main(["run", str(bad), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"bad.toml: {key}" in err and "Fix: did you mean" in err and "Traceback" not in err
+    assert not list(tmp_path.glob("*.mcap"))  # refused when loaded, before any log is opened
 
 
 def test_unwritable_output_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str], f16_text: str) -> None:
@@ -82,7 +124,7 @@ def test_sigkill_halfway_then_repair(tmp_path: Path, f16_text: str) -> None:
     finally:
         if proc.poll() is None:
             proc.kill()
-    with pytest.raises(Exception):
+    with pytest.raises(LogError, match="fdi-sim repair"):
         read_log(log)  # no summary: the reader refuses and points at repair
     out = tmp_path / "fixed.mcap"
     assert main(["repair", str(log), "--out", str(out)]) == 0

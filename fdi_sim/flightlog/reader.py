@@ -25,6 +25,7 @@ from fdi_sim.flightlog.records import (
     FOOTER_RECORD_BYTES,
     MCAP_MAGIC,
     MESSAGE_HEAD,
+    RECORD_HEAD_BYTES,
     has_footer,
     message_dtype,
     parse_chunk,
@@ -35,6 +36,7 @@ from fdi_sim.flightlog.schemas import (
     CDR_LE_HEADER,
     MESSAGE_ENCODING_CDR,
     MESSAGE_ENCODING_JSON,
+    METADATA_FAULTS,
     METADATA_SCENARIO,
     SCHEMA_ENCODING_ROS2MSG,
     parse_ros2msg_float64,
@@ -200,6 +202,8 @@ class LogInfo:
     metadata_names : tuple of str
     scenario_name, scenario_seed : str or None
         From the ``scenario`` metadata record's ``name`` / ``seed`` keys, if present.
+    faults : tuple of dict
+        The ``faults`` metadata record's catalogue (label, type, target, params, windows_s [s]).
     """
 
     path: Path
@@ -259,7 +263,7 @@ def _scan_chunk(records: bytes, start: int = 0) -> dict[int, tuple[NDArray[np.ui
             cid, _seq, log_ns = struct.unpack_from("<HIQ", records, body)
             logs, offs = found.setdefault(cid, ([], []))
             logs.append(log_ns)
-            offs.append(body - 9)
+            offs.append(body - RECORD_HEAD_BYTES)
     return {cid: (np.array(lo, dtype=np.uint64), np.array(of, dtype=np.uint64)) for cid, (lo, of) in found.items()}
 
 
@@ -317,7 +321,8 @@ def read_log(path: str | Path) -> FlightLog:
             opcode, length = struct.unpack_from("<BQ", data, ci.chunk_start_offset)
             if opcode != Opcode.CHUNK:
                 raise ValueError(f"no chunk record at byte {ci.chunk_start_offset}")
-            body = memoryview(data)[ci.chunk_start_offset + 9:ci.chunk_start_offset + 9 + length]
+            start = ci.chunk_start_offset + RECORD_HEAD_BYTES
+            body = memoryview(data)[start:start + length]
             records = parse_chunk(body).records
             if ci.message_index_offsets:
                 index = {}
@@ -366,7 +371,7 @@ def _decode_channel(cid: int, channel: Any, schema: Any, parts: list[tuple[bytes
             if opcode != Opcode.MESSAGE or got != cid:
                 raise ValueError(f"{channel.topic}: index points at a record that is not its message")
             logs.append(log_ns)
-            payloads.append(records[off + MESSAGE_HEAD.size:off + 9 + length])
+            payloads.append(records[off + MESSAGE_HEAD.size:off + RECORD_HEAD_BYTES + length])
     order = sorted(range(len(logs)), key=logs.__getitem__)
     if channel.message_encoding == MESSAGE_ENCODING_JSON:
         json_schema = json.loads(schema.data) if schema is not None and schema.data else {}
@@ -397,7 +402,7 @@ def _decode_vector(cid: int, topic: str, schema_name: str, fields: tuple[str, ..
     if len(rec):
         if not (np.all(rec["opcode"] == Opcode.MESSAGE) and np.all(rec["channel_id"] == cid)):
             raise ValueError(f"{topic}: index points at records that are not its messages")
-        if not np.all(rec["length"] == size - 9):
+        if not np.all(rec["length"] == size - RECORD_HEAD_BYTES):
             raise ValueError(f"{topic}: messages are not {len(fields)} packed float64 (size mismatch)")
     header = rec["cdr"]
     values = rec["values"]
@@ -471,10 +476,8 @@ def log_info(path: str | Path) -> LogInfo:
 
 def _fault_catalog(metadata: dict[str, dict[str, str]]) -> tuple[dict, ...]:
     """The fault catalogue written by the simulation (``faults`` metadata record), if any."""
-    import json
-
     try:
-        return tuple(json.loads(metadata.get("faults", {}).get("catalog", "[]")))
+        return tuple(json.loads(metadata.get(METADATA_FAULTS, {}).get("catalog", "[]")))
     except (ValueError, TypeError):
         return ()
 

@@ -16,7 +16,10 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
 from mcap.opcode import Opcode
+from mcap.records import Channel, Message, Metadata, Schema
 
 from fdi_sim.errors import LogError
 from fdi_sim.flightlog.records import (
@@ -36,6 +39,8 @@ _OP_DERIVED = frozenset({Opcode.MESSAGE_INDEX, Opcode.CHUNK_INDEX, Opcode.ATTACH
                          Opcode.STATISTICS, Opcode.METADATA_INDEX, Opcode.SUMMARY_OFFSET})
 #: messages per chunk when a file held messages outside chunks
 _LOOSE_CHUNK_MESSAGES = 4096
+#: what parsing a damaged record raises (UnicodeDecodeError and JSONDecodeError are ValueErrors)
+_DAMAGED = (ValueError, struct.error, McapError)
 
 
 @dataclass(frozen=True)
@@ -145,15 +150,29 @@ def repair_log(src: str | Path, dst: str | Path | None = None, *, compression: s
     return _write(src_p, dst_p, data, rec, compression)
 
 
+def _stream(body: memoryview) -> ReadDataStream:
+    return ReadDataStream(io.BytesIO(bytes(body)))
+
+
+def _keep_schema(rec: _Recovered, body: memoryview) -> None:
+    """Record a Schema record (the first of an id wins); raise if its text is damaged."""
+    s = Schema.read(_stream(body))
+    # schema records outside chunks carry no CRC: a damaged text schema must not reach the repaired file
+    if s.encoding in (SCHEMA_ENCODING_ROS2MSG, SCHEMA_ENCODING_JSONSCHEMA):
+        text = bytes(s.data).decode("utf-8")
+        if s.encoding == SCHEMA_ENCODING_JSONSCHEMA:
+            json.loads(text)
+    rec.schemas.setdefault(s.id, (s.name, s.encoding, bytes(s.data)))
+
+
+def _keep_channel(rec: _Recovered, body: memoryview) -> None:
+    """Record a Channel record (the first of an id wins)."""
+    c = Channel.read(_stream(body))
+    rec.channels.setdefault(c.id, (c.schema_id, c.topic, c.message_encoding, dict(c.metadata)))
+
+
 def _scan(data: bytes) -> _Recovered:
     """Collect every usable complete record of the data section."""
-    from mcap.data_stream import ReadDataStream
-    from mcap.exceptions import McapError
-    from mcap.records import Channel, Message, Metadata, Schema
-
-    def stream(body: memoryview) -> ReadDataStream:
-        return ReadDataStream(io.BytesIO(bytes(body)))
-
     rec = _Recovered()
     view = memoryview(data)
     loose: list[RawMessage] = []
@@ -165,42 +184,33 @@ def _scan(data: bytes) -> _Recovered:
                 rec.had_footer = has_footer(data)
                 break
             if opcode == Opcode.SCHEMA:
-                s = Schema.read(stream(body))
-                # schema records carry no CRC: a damaged text schema must not reach the repaired file
-                if s.encoding in (SCHEMA_ENCODING_ROS2MSG, SCHEMA_ENCODING_JSONSCHEMA):
-                    text = bytes(s.data).decode("utf-8")
-                    if s.encoding == SCHEMA_ENCODING_JSONSCHEMA:
-                        json.loads(text)
-                rec.schemas.setdefault(s.id, (s.name, s.encoding, bytes(s.data)))
+                _keep_schema(rec, body)
             elif opcode == Opcode.CHANNEL:
-                c = Channel.read(stream(body))
-                rec.channels.setdefault(c.id, (c.schema_id, c.topic, c.message_encoding, dict(c.metadata)))
+                _keep_channel(rec, body)
             elif opcode == Opcode.METADATA:
-                m = Metadata.read(stream(body))
+                m = Metadata.read(_stream(body))
                 rec.metadata.append((m.name, dict(m.metadata)))
             elif opcode == Opcode.MESSAGE:
-                msg = Message.read(stream(body), length)
+                msg = Message.read(_stream(body), length)
                 loose.append(RawMessage(msg.channel_id, msg.sequence, msg.log_time, bytes(msg.data)))
             elif opcode == Opcode.CHUNK:
                 try:
-                    rec.chunks.append(_chunk_messages(parse_chunk(body).records, rec, stream))
-                except (ValueError, struct.error, McapError, UnicodeDecodeError):
+                    rec.chunks.append(_chunk_messages(parse_chunk(body).records, rec))
+                except _DAMAGED:
                     rec.chunks_dropped += 1
             elif opcode == Opcode.HEADER or opcode in _OP_DERIVED:
                 pass
             else:  # attachments and unknown records are not carried over
                 rec.skipped += 1
-        except (ValueError, struct.error, McapError, UnicodeDecodeError):
+        except _DAMAGED:
             rec.skipped += 1
     for i in range(0, len(loose), _LOOSE_CHUNK_MESSAGES):
         rec.chunks.append(loose[i:i + _LOOSE_CHUNK_MESSAGES])
     return rec
 
 
-def _chunk_messages(records: bytes, rec: _Recovered, stream: object) -> list[RawMessage]:
+def _chunk_messages(records: bytes, rec: _Recovered) -> list[RawMessage]:
     """Messages (and schemas/channels) inside one decompressed chunk; raise if malformed."""
-    from mcap.records import Channel, Schema
-
     out: list[RawMessage] = []
     end = 0
     view = memoryview(records)
@@ -212,11 +222,9 @@ def _chunk_messages(records: bytes, rec: _Recovered, stream: object) -> list[Raw
             cid, seq, log_ns = struct.unpack_from("<HIQ", records, start)
             out.append(RawMessage(cid, seq, log_ns, records[start + 22:end]))
         elif opcode == Opcode.SCHEMA:
-            s = Schema.read(stream(view[start:end]))  # type: ignore[operator]
-            rec.schemas.setdefault(s.id, (s.name, s.encoding, bytes(s.data)))
+            _keep_schema(rec, view[start:end])
         elif opcode == Opcode.CHANNEL:
-            c = Channel.read(stream(view[start:end]))  # type: ignore[operator]
-            rec.channels.setdefault(c.id, (c.schema_id, c.topic, c.message_encoding, dict(c.metadata)))
+            _keep_channel(rec, view[start:end])
     if end != len(records):
         raise ValueError("chunk records do not fill the chunk")
     return out

@@ -54,6 +54,8 @@ TOPIC_SIM_STATUS: str = "/sim/status"
 
 #: metadata record holding the scenario text, seed and package versions (DESIGN.md)
 METADATA_SCENARIO: str = "scenario"
+#: metadata record holding the fault catalogue (key ``catalog``: JSON list, one dict per fault)
+METADATA_FAULTS: str = "faults"
 
 _TOPIC_RE = re.compile(r"^(/[a-z0-9][a-z0-9_\-]*)+$")
 # ROS 2 field names: lower case, start with a letter, no "__", no trailing "_" (rosidl rules)
@@ -114,11 +116,6 @@ class VectorSchema:
     def n_values(self) -> int:
         """Number of values a writer passes per message (fields without ``t_s``)."""
         return len(self.fields) - 1
-
-    @property
-    def message_size_bytes(self) -> int:
-        """CDR payload size: 4-byte header + 8 bytes per field (no padding, see module doc)."""
-        return len(CDR_LE_HEADER) + 8 * len(self.fields)
 
     def ros2msg(self) -> str:
         """Schema text, one ``float64 <field>`` line per field."""
@@ -213,11 +210,6 @@ class EventSchema:
     name: str
     json_text: str
     required: tuple[str, ...]
-
-    @property
-    def json_schema(self) -> dict[str, Any]:
-        """The JSON Schema as a dict (a fresh copy)."""
-        return json.loads(self.json_text)
 
     def encode(self, payload: Mapping[str, Any]) -> bytes:
         """Canonical JSON of one payload: sorted keys, no spaces, no NaN (invalid JSON).

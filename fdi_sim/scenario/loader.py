@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import difflib
 import json
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Literal, Mapping, get_args, get_origin
 
 from pydantic import BaseModel, ValidationError
 
@@ -125,6 +126,7 @@ def from_dict(data: Mapping[str, Any], source: str = "<scenario>", text: str | N
     """Validate a scenario given as nested dicts (what TOML parses to)."""
     if not isinstance(data, Mapping):
         raise ScenarioError(source, "", "a scenario must be a table of keys", "start from a file in scenarios/")
+    _check_finite(data, source)
     try:
         model = ScenarioModel.model_validate(dict(data))
     except ValidationError as exc:
@@ -148,8 +150,8 @@ def from_dict(data: Mapping[str, Any], source: str = "<scenario>", text: str | N
             if spec.params is None or not (isinstance(spec.params, type) and issubclass(spec.params, BaseModel)):
                 params: Any = dict(entry)
             else:
-                try:
-                    params = spec.params.model_validate(dict(entry))
+                try:  # strict as the sections are (schema.py); TOML arrays read as tuples
+                    params = spec.params.model_validate(_tuples(dict(entry)), strict=True)
                 except ValidationError as exc:
                     raise _to_scenario_error(exc, source, spec.params, prefix=key) from None
             entries.append((type_id, params))
@@ -161,10 +163,51 @@ def from_dict(data: Mapping[str, Any], source: str = "<scenario>", text: str | N
     return sc
 
 
+def _check_finite(data: Any, source: str, key: str = "") -> None:
+    """Refuse ``nan`` and ``inf`` (valid TOML) anywhere: no scenario key means them."""
+    if isinstance(data, float) and not math.isfinite(data):
+        raise ScenarioError(source, key, f"{data} is not a finite number", "give a finite number")
+    items = data.items() if isinstance(data, Mapping) else enumerate(data) if isinstance(data, (list, tuple)) else ()
+    for k, v in items:
+        _check_finite(v, source, f"{key}[{k}]" if isinstance(k, int) else f"{key}.{k}" if key else str(k))
+
+
+def _tuples(data: Any) -> Any:
+    """Lists (TOML arrays, JSON) as tuples, recursively, for strict validation of tuple fields."""
+    if isinstance(data, (list, tuple)):
+        return tuple(_tuples(v) for v in data)
+    if isinstance(data, Mapping):
+        return {k: _tuples(v) for k, v in data.items()}
+    return data
+
+
+def _check_sensors(sc: Scenario) -> None:
+    """The sensor suite exists and every override names one of its sensors (before any run)."""
+    from fdi_sim.sensors import load_suite
+
+    s = sc.model.sensors
+    try:
+        specs = load_suite(sc.aircraft, s.suite)
+    except FileNotFoundError as exc:  # load_suite names the file it looked for
+        # load_suite's convention: "default" is sensors.toml, any other suite sensors_<suite>.toml
+        folder = Path(str(exc.args[0])).parent
+        known = ["default"] + sorted(p.stem.removeprefix("sensors_") for p in folder.glob("sensors_*.toml"))
+        close = difflib.get_close_matches(s.suite, known, n=1, cutoff=0.5)
+        fix = (f"did you mean {close[0]!r}? " if close else "") + f"{sc.aircraft} suites: {', '.join(known)}"
+        raise ScenarioError(sc.source, "sensors.suite", f"no sensor suite {s.suite!r} for {sc.aircraft}", fix) from None
+    names = [sp.name for sp in specs]
+    for name in s.overrides:
+        if name not in names:
+            close = difflib.get_close_matches(name, names, n=2, cutoff=0.5)
+            fix = (f"did you mean {' or '.join(close)}? " if close else "") + f"sensors are: {', '.join(names)}"
+            raise ScenarioError(sc.source, f"sensors.overrides.{name}", "no such sensor in the suite", fix)
+
+
 def _cross_checks(sc: Scenario) -> None:
     m = sc.model
     if m.aircraft == "f16" and m.initial.flaps_deg:
         raise ScenarioError(sc.source, "initial.flaps_deg", "the F-16 has no pilot flaps", "remove initial.flaps_deg")
+    _check_sensors(sc)
     from fdi_sim.faults.check import check_faults
 
     check_faults(sc)
@@ -175,21 +218,24 @@ def _cross_checks(sc: Scenario) -> None:
                                 "start it earlier or lengthen duration_s")
 
 
-def _model_fields(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str]:
-    """Field names of the (sub)model at ``loc`` (for 'did you mean')."""
+def _model_fields(model: type[BaseModel], loc: tuple[Any, ...]) -> dict[str, Any]:
+    """Fields of the (sub)model holding the key at ``loc`` (for 'did you mean', what to add)."""
     cur: Any = model
+    in_mapping = False  # the previous part was a dict field: this part is one of its keys
     for part in loc[:-1]:
-        if isinstance(part, int):
+        if isinstance(part, int) or in_mapping:
+            in_mapping = False
             continue
         f = getattr(cur, "model_fields", {}).get(part)
         if f is None:
-            return []
+            return {}
         ann = f.annotation
-        sub = [a for a in getattr(ann, "__args__", (ann,)) if isinstance(a, type) and issubclass(a, BaseModel)]
+        in_mapping = get_origin(ann) is dict  # dict[str, Model]: skip the key
+        sub = [a for a in get_args(ann) or (ann,) if isinstance(a, type) and issubclass(a, BaseModel)]
         if not sub:
-            return []
+            return {}
         cur = sub[0]
-    return list(getattr(cur, "model_fields", {}))
+    return dict(getattr(cur, "model_fields", {}))
 
 
 def _to_scenario_error(exc: ValidationError, source: str, model: type[BaseModel], prefix: str = "") -> ScenarioError:
@@ -203,7 +249,7 @@ def _to_scenario_error(exc: ValidationError, source: str, model: type[BaseModel]
     typ, msg = err.get("type", ""), err.get("msg", "invalid")
     if typ == "extra_forbidden":
         name = str(loc[-1]) if loc else ""
-        known = _model_fields(model, loc)
+        known = list(_model_fields(model, loc))
         close = difflib.get_close_matches(name, known, n=2, cutoff=0.4)
         unitless = [k for k in known if k.startswith(name + "_")]
         if unitless:
@@ -214,17 +260,47 @@ def _to_scenario_error(exc: ValidationError, source: str, model: type[BaseModel]
             fix = f"remove it; allowed keys here: {', '.join(known)}" if known else "remove it"
         return ScenarioError(source, key, "unknown key", fix)
     if typ == "missing":
-        return ScenarioError(source, key, "required key is missing", f"add {loc[-1] if loc else key} (see scenarios/ for examples)")
+        name = str(loc[-1]) if loc else key
+        f = _model_fields(model, loc).get(name)
+        ann = f.annotation if f is not None else None
+        if isinstance(ann, type) and issubclass(ann, BaseModel):
+            fix = f"add the [{key}] table with {', '.join(k for k, v in ann.model_fields.items() if v.is_required())}"
+        elif get_origin(ann) is Literal:
+            fix = f"add {name} = one of {', '.join(repr(a) for a in get_args(ann))}"
+        else:
+            fix = f"add {name}"
+        return ScenarioError(source, key, "required key is missing", fix + " (see scenarios/ for examples)")
     value = err.get("input")
-    shown = repr(value) if not isinstance(value, (dict, list)) else type(value).__name__
+    shown = repr(value) if not isinstance(value, (dict, list, tuple)) else type(value).__name__
     fix = ""
     ctx = err.get("ctx") or {}
     if "expected" in ctx:
         fix = f"use one of {ctx['expected']}"
-    elif any(k in ctx for k in ("ge", "gt", "le", "lt")):
-        fix = "use a value " + " and ".join(f"{ {'ge': '>=', 'gt': '>', 'le': '<=', 'lt': '<'}[k]} {v}" for k, v in ctx.items() if k in ("ge", "gt", "le", "lt"))
+    elif any(k in ctx for k in _BOUNDS):
+        fix = "use a value " + " and ".join(f"{_BOUNDS[k]} {v}" for k, v in ctx.items() if k in _BOUNDS)
+    elif "min_length" in ctx or "max_length" in ctx:
+        fix = "give " + " and ".join(f"{w} {ctx[k]}" for k, w in (("min_length", "at least"), ("max_length", "at most"))
+                                     if k in ctx) + " characters"
+    elif "pattern" in ctx:
+        fix = f"make it match the regular expression {ctx['pattern']}"
+    elif typ == "tuple_type" and len(loc) == 1 and str(loc[0]) in _PLUGIN_SECTIONS:
+        fix = f"write each entry as a [[{loc[0]}]] table"
     elif typ == "value_error":
         return ScenarioError(source, key, "invalid section", msg.removeprefix("Value error, "))
-    elif typ.endswith("_type") or typ.endswith("_parsing"):
-        fix = f"give a {typ.split('_')[0]}"
+    elif typ.endswith(("_type", "_parsing")) or typ == "int_from_float":
+        fix = next((f for prefix, f in _TYPE_FIXES.items() if typ.startswith(prefix)), "")
     return ScenarioError(source, key, f"{msg} (got {shown})", fix or "see the scenario reference in README.md")
+
+
+_BOUNDS = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
+#: pydantic type-error prefix (``float_type``, ``int_from_float``, ...) -> what to write in TOML
+_TYPE_FIXES = {
+    "int": "give a whole number (no decimal point, no quotes)",
+    "float": "give a number (no quotes)",
+    "bool": "give true or false (no quotes)",
+    "string": "give a quoted string",
+    "tuple": "give an array",
+    "list": "give an array",
+    "dict": "give a table",
+    "model": "give a table",
+}

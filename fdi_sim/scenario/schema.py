@@ -12,7 +12,10 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # strict: TOML values are typed, so a string or a boolean where a number belongs is a mistake
+    # (lax pydantic read ``altitude = "yes"`` as True and ``duration_s = true`` as 1.0 s); an
+    # integer still fills a float key
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 class InitialSection(_Section):
@@ -84,6 +87,7 @@ class ScenarioModel(_Section):
     autopilot: AutopilotSection = AutopilotSection()
     sensors: SensorsSection = SensorsSection()
     limits: LimitsSection = LimitsSection()
-    maneuvers: tuple[dict[str, Any], ...] = ()
-    faults: tuple[dict[str, Any], ...] = ()
-    detectors: tuple[dict[str, Any], ...] = ()
+    # TOML arrays (and JSON) give lists: not strict; the entries are validated by their plugin
+    maneuvers: tuple[dict[str, Any], ...] = Field(default=(), strict=False)
+    faults: tuple[dict[str, Any], ...] = Field(default=(), strict=False)
+    detectors: tuple[dict[str, Any], ...] = Field(default=(), strict=False)

@@ -32,6 +32,23 @@ def test_shipped_scenarios_validate(path: Path) -> None:
     ("[atmosphere]", "[atmospheer]", "atmospheer", "atmosphere"),
     ("vt_kts = 400.0", "", "initial", "vt_kts"),
     ("t_start_s = 2.0", "t_start_s = 20.0", "maneuvers[0].t_start_s", "duration_s"),
+    # wrong types are refused, not coerced (lax pydantic read "yes" as true and true as 1.0 s)
+    ('turbulence = "moderate"', 'turbulence = "moderate"\n[autopilot]\naltitude = "yes"', "autopilot.altitude", "true or false"),
+    ("h_ft = 10000.0", 'h_ft = "10000"', "initial.h_ft", "give a number"),
+    ("duration_s = 10.0", "duration_s = true", "duration_s", "give a number"),
+    ("seed = 7", "seed = 7.5", "seed", "whole number"),
+    ("pulse_s = 1.0", "pulse_s = true", "maneuvers[0].pulse_s", "give a number"),
+    ("h_ft = 10000.0", "h_ft = nan", "initial.h_ft", "finite"),
+    ("pulse_s = 1.0", "pulse_s = inf", "maneuvers[0].pulse_s", "finite"),
+    ('turbulence = "moderate"', 'turbulence = "moderate"\n[sensors.overrides.alpha_rad]\nbias = -inf', "sensors.overrides.alpha_rad.bias", "finite"),
+    # the sensor suite and its overrides are checked when the file is loaded, not mid-run
+    ('turbulence = "moderate"', 'turbulence = "moderate"\n[sensors]\nsuite = "defualt"', "sensors.suite", "'default'"),
+    ('turbulence = "moderate"', 'turbulence = "moderate"\n[sensors.overrides.alpah_rad]\nnoise_std = 0.1', "sensors.overrides.alpah_rad", "alpha_rad"),
+    ('turbulence = "moderate"', 'turbulence = "moderate"\n[sensors.overrides.alpha_rad]\nnoise = 0.1', "sensors.overrides.alpha_rad.noise", "noise_std"),
+    ("[initial]\nh_ft = 10000.0\nvt_kts = 400.0\n", "", "initial", "[initial] table with h_ft"),
+    ('aircraft = "f16"\n', "", "aircraft", "'f16', 'DHC6'"),
+    ("[[maneuvers]]", "[maneuvers]", "maneuvers", "[[maneuvers]] table"),
+    ('name = "t_f16"', 'name = "t f16"', "name", "regular expression"),
 ])
 def test_bad_keys_name_file_key_and_fix(f16_text: str, old: str, new: str, key: str, fix: str) -> None:
     assert old in f16_text
