@@ -28,6 +28,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if dropped:
             print(f"note: --duration {args.duration:g} s drops {dropped} maneuver/fault entries that start later",
                   file=sys.stderr)
+    if sc.detectors:  # sim.run flies pilot, faults and sensors only: say so rather than drop them silently
+        print(f"note: the {len(sc.detectors)} [[detectors]] entries are not run by `fdi-sim run` "
+              "(only their type ids are checked)", file=sys.stderr)
     res = run(sc, args.out, log_path=args.log, progress=None if not args.quiet else False)
     print(res.summary.format())
     print(f"log        {res.log_path}")
@@ -40,7 +43,7 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
             data = tomllib.loads(p.read_text(encoding="utf-8"))
             desc = next(iter(str(data.get("description", "")).strip().splitlines()), "")
             ac = data.get("aircraft", "?")
-        except (tomllib.TOMLDecodeError, OSError) as exc:
+        except (ValueError, OSError) as exc:  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
             desc, ac = f"(unreadable: {exc})", "?"
         print(f"{p.relative_to(SCENARIO_DIR.parent)!s:48} {ac:5} {desc}")
     return 0

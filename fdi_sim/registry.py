@@ -43,16 +43,22 @@ class PluginSpec:
 _REGISTRY: dict[str, dict[str, PluginSpec]] = {k: {} for k in KINDS}
 
 
+def _table(kind: str) -> dict[str, PluginSpec]:
+    table = _REGISTRY.get(kind)
+    if table is None:
+        raise RegistryError(f"unknown plugin kind {kind!r}; kinds are {', '.join(KINDS)}")
+    return table
+
+
 def register(kind: str, id: str, summary: str, factory: Callable[..., Any], params: Any = None) -> PluginSpec:
     """Add a plugin to the catalogue; a duplicate id raises :class:`RegistryError`."""
-    if kind not in _REGISTRY:
-        raise RegistryError(f"unknown plugin kind {kind!r}; kinds are {', '.join(KINDS)}")
+    table = _table(kind)
     if not _valid_id(id):
         raise RegistryError(f"plugin id {id!r} must look like 'name-v1' (lower case, versioned)")
-    if id in _REGISTRY[kind]:
+    if id in table:
         raise RegistryError(f"{kind} id {id!r} is already registered")
     spec = PluginSpec(kind=kind, id=id, summary=summary, factory=factory, params=params)
-    _REGISTRY[kind][id] = spec
+    table[id] = spec
     return spec
 
 
@@ -64,9 +70,7 @@ def _valid_id(id: str) -> bool:
 def get(kind: str, id: str) -> PluginSpec:
     """Look a plugin up; an unknown id raises with the closest known ids."""
     load_builtin_plugins()
-    table = _REGISTRY.get(kind)
-    if table is None:
-        raise RegistryError(f"unknown plugin kind {kind!r}; kinds are {', '.join(KINDS)}")
+    table = _table(kind)
     if id not in table:
         close = difflib.get_close_matches(id, list(table), n=3, cutoff=0.5)
         hint = f" Did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
@@ -77,7 +81,7 @@ def get(kind: str, id: str) -> PluginSpec:
 def ids(kind: str) -> list[str]:
     """Sorted ids of one kind."""
     load_builtin_plugins()
-    return sorted(_REGISTRY[kind])
+    return sorted(_table(kind))
 
 
 def all_plugins() -> list[PluginSpec]:

@@ -20,10 +20,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_run_info_plugins_scenarios(tmp_path: Path, capsys: pytest.CaptureFixture[str], f16_text: str) -> None:
     scn = tmp_path / "s.toml"
-    scn.write_text(f16_text)
+    scn.write_text(f16_text + '[[detectors]]\ntype = "parity-v1"\n')
     assert main(["run", str(scn), "--out", str(tmp_path), "--duration", "3", "--quiet"]) == 0
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert "status     completed" in out and "log " in out
+    assert "the 1 [[detectors]] entries are not run" in err  # said, not silently dropped
     log = next(tmp_path.glob("*.mcap"))
     _check_with_the_mcap_reader(log)
     assert main(["info", str(log)]) == 0
@@ -144,3 +145,14 @@ def test_run_shortened_drops_later_entries(tmp_path: Path, capsys: pytest.Captur
     assert main(["run", str(scn), "--out", str(tmp_path), "--duration", "20", "--quiet"]) == 0
     err = capsys.readouterr().err
     assert "drops 3 maneuver/fault entries" in err  # the doublets at 20, 35 s and the 3211 at 45 s
+
+
+def test_info_lists_the_fault_catalogue(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`fdi-sim info` reads the `faults` metadata record the run wrote: label, type, target, onset."""
+    scn = ROOT / "scenarios" / "dhc6_airspeed_drift.toml"  # sensor-drift-v1 on vc_kts from t = 10 s, open-ended
+    log = tmp_path / "drift.mcap"
+    assert main(["run", str(scn), "--log", str(log), "--duration", "11", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(log)]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("fault:")]
+    assert len(lines) == 1 and lines[0].split()[2:] == ["sensor-drift-v1", "on", "vc_kts,", "from", "10", "s"], lines
