@@ -278,13 +278,13 @@ class VectorChannel:
         if not in_window:
             self._w._admit_time(t_s, self.topic)
         kind = type(values)
-        if kind is _NDARRAY and values.dtype is _F8_LE and values.shape == self._shape:
-            b = values.tobytes()
-        elif kind is tuple or kind is list:
+        if kind is tuple or kind is list:
             try:
                 b = self._pack(*values)
             except (struct.error, TypeError):
                 b = self._values_slow_path(values)
+        elif kind is _NDARRAY and values.dtype is _F8_LE and values.shape == self._shape:
+            b = values.tobytes()
         else:
             b = self._values_slow_path(values)
         self._t.append(t_s)

@@ -117,10 +117,12 @@ class SensorSuite:
             decim.append(int(round(d)))
         self._period = math.lcm(*decim)
         truth_idx = [list(truth_names).index(n) for n in self.names]
-        # per phase k % period: the sensors that sample, as (sensor, truth index, quantum) -- scalar Python
-        # per step is cheaper than half a dozen numpy calls on a 14-element vector
+        # per phase k % period: the sensors that sample, as (sensor, truth index) without quantization
+        # and (sensor, truth index, quantum) with it -- scalar Python per step is cheaper than half a
+        # dozen numpy calls on a 14-element vector
         self._plan = [
-            [(i, truth_idx[i], specs[i].quantum) for i in range(len(specs)) if k % decim[i] == 0]
+            ([(i, truth_idx[i]) for i in range(len(specs)) if k % decim[i] == 0 and not specs[i].quantum],
+             [(i, truth_idx[i], specs[i].quantum) for i in range(len(specs)) if k % decim[i] == 0 and specs[i].quantum])
             for k in range(self._period)
         ]
         self._noise_std = np.array([s.noise_std for s in specs])
@@ -166,7 +168,9 @@ class SensorSuite:
             j = 0
         off = self._offset[j]
         y = self._y
-        for i, ti, q in self._plan[k % self._period]:
-            v = truth[ti] + off[i]
-            y[i] = round(v / q) * q if q else v  # sample, then hold until the next sample
+        plain, quantized = self._plan[k % self._period]
+        for i, ti in plain:  # sample, then hold until the next sample
+            y[i] = truth[ti] + off[i]
+        for i, ti, q in quantized:
+            y[i] = round((truth[ti] + off[i]) / q) * q
         return y[:]

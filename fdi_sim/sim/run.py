@@ -286,28 +286,27 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 raise SimulationDiverged(t_s, f"alpha {xl[i_alpha] * DEG_PER_RAD:.1f} deg outside [{lim.alpha_min_deg}, {lim.alpha_max_deg}]")
             if abs(xl[i_phi]) > phi_max:
                 raise SimulationDiverged(t_s, f"bank {xl[i_phi] * DEG_PER_RAD:.1f} deg beyond {lim.phi_max_deg}")
-            if max(abs(xl[i_p]), abs(xl[i_q]), abs(xl[i_r])) > rate_max:
+            if abs(xl[i_p]) > rate_max or abs(xl[i_q]) > rate_max or abs(xl[i_r]) > rate_max:  # max(|p|,|q|,|r|)
                 raise SimulationDiverged(t_s, f"body rate beyond {rate_max} rad/s")
             if xl[i_vc] < vc_min:
                 raise SimulationDiverged(t_s, f"airspeed {xl[i_vc]:.1f} kt below {vc_min}")
             y = measure(t_s, xl)
             if inj is None:
-                cmd = pilot.step(t_s, y)
-                write_cmd(cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm)
+                _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y)  # PilotCommand fields
+                write_cmd(el, ai, ru, th)
             else:  # faults: sensors -> pilot -> commands -> plant (surfaces, engines, icing)
                 inj.begin_step(t_s)
                 y = inj.sensors(t_s, k, y, xl)
-                cmd = pilot.step(t_s, y)
-                write_cmd(*inj.commands(t_s, cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm,
-                                        cmd.throttle_cmd_norm))
+                _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y)
+                write_cmd(*inj.commands(t_s, el, ai, ru, th))
                 inj.after_commands()
                 inj.plant(t_s, xl)
                 eta = inj.icing_eta
             # --- statistics: deviation from the references (airspeed relative to the steady air) --
             v_air = math.sqrt((xl[i_vn] - wn) ** 2 + (xl[i_ve] - we) ** 2 + xl[i_vd] ** 2)
-            dv = abs(xl[i_vc] * v_air / xl[i_vt] - cmd.vc_ref_kts)
-            dh = abs(xl[i_h] - cmd.h_ref_ft)
-            dphi = abs(xl[i_phi] - cmd.phi_ref_rad) * DEG_PER_RAD
+            dv = abs(xl[i_vc] * v_air / xl[i_vt] - vc_ref)
+            dh = abs(xl[i_h] - h_ref)
+            dphi = abs(xl[i_phi] - phi_ref) * DEG_PER_RAD
             if dh > max_dh:
                 max_dh = dh
             if dv > max_dv:
@@ -324,8 +323,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                         ch_fevents.write(te, ev)
                 if ch_valid is not None:
                     ch_valid.write(t_s, inj.valid)
-            ch_cmd.write(t_s, (cmd.elevator_cmd_norm, cmd.aileron_cmd_norm, cmd.rudder_cmd_norm, cmd.throttle_cmd_norm,
-                               cmd.h_ref_ft, cmd.vc_ref_kts, cmd.psi_ref_rad, cmd.phi_ref_rad, pitch_trim))
+            ch_cmd.write(t_s, (el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref, pitch_trim))
             ch_op.write(t_s, (xl[i_h], xl[i_vc], xl[i_mach], xl[i_alpha], flaps_deg, eta))
             if k == n_steps:
                 break
