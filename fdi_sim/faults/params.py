@@ -11,12 +11,13 @@ on the throttle, ``bias_kts`` on ``vc_kts``, ``drift_degps2`` (a rate) on ``q_ra
 """
 from __future__ import annotations
 
+import difflib
 from typing import ClassVar, Literal
 
 from pydantic import ConfigDict, Field, model_validator
 
 from fdi_sim.faults.profile import ProfileParams
-from fdi_sim.faults.quantities import _UNIT_DIM
+from fdi_sim.faults.quantities import _UNIT_DIM, allowed_units, target_unit
 
 
 class FaultParams(ProfileParams):
@@ -41,7 +42,7 @@ class FaultParams(ProfileParams):
                                  "(type, target, label, t_start_s, t_end_s, ramp_s, intermittent)")
             unit = key[len(prefix) + 1:]
             if unit not in _UNIT_DIM:
-                raise ValueError(f"{key!r}: unknown unit {unit!r} (units: {', '.join(sorted(_UNIT_DIM))})")
+                raise ValueError(self._unit_fix(key, prefix, unit))
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ValueError(f"{key!r} must be a number")
             if prefix in seen:
@@ -51,6 +52,18 @@ class FaultParams(ProfileParams):
         if missing:
             raise ValueError(f"missing {missing[0]}_<unit> (e.g. {missing[0]}_{'deg' if 'rate' not in missing[0] else 'degps'})")
         return self
+
+    def _unit_fix(self, key: str, prefix: str, unit: str) -> str:
+        """The message for a magnitude key with an unknown unit: the units of this target, the nearest one."""
+        try:
+            native = target_unit(self.type.split("-", 1)[0], self.target)
+        except KeyError:  # a target with no unit suffix: check_faults names it later
+            native = None
+        units = allowed_units(native, self.MAGNITUDES[prefix][1]) if native else tuple(sorted(_UNIT_DIM))
+        near = difflib.get_close_matches(unit, units, n=1, cutoff=0.5)
+        hint = f"did you mean {prefix}_{near[0]}? " if near else ""
+        where = f"on {self.target} ({native}{' per second' if self.MAGNITUDES[prefix][1] else ''})" if native else "here"
+        return f"{key!r}: unknown unit {unit!r}; {hint}{prefix}_<unit> takes {where} one of: {', '.join(units)}"
 
     def magnitude(self, prefix: str) -> tuple[float, str] | None:
         """``(value, unit)`` of a magnitude as written, or None if not given."""
