@@ -139,7 +139,7 @@ def from_dict(data: Mapping[str, Any], source: str = "<scenario>", text: str | N
             type_id = entry.get("type")
             if not isinstance(type_id, str):
                 known = ", ".join(registry.ids(kind)) or "none registered yet"
-                raise ScenarioError(source, f"{key}.type", f"missing or not a string", f"set type to one of: {known}")
+                raise ScenarioError(source, f"{key}.type", "missing or not a string", f"set type to one of: {known}")
             try:
                 spec = registry.get(kind, type_id)
             except RegistryError:
@@ -183,15 +183,13 @@ def _tuples(data: Any) -> Any:
 
 def _check_sensors(sc: Scenario) -> None:
     """The sensor suite exists and every override names one of its sensors (before any run)."""
-    from fdi_sim.sensors import load_suite
+    from fdi_sim.sensors.suite import load_suite, suite_names
 
     s = sc.model.sensors
     try:
         specs = load_suite(sc.aircraft, s.suite)
-    except FileNotFoundError as exc:  # load_suite names the file it looked for
-        # load_suite's convention: "default" is sensors.toml, any other suite sensors_<suite>.toml
-        folder = Path(str(exc.args[0])).parent
-        known = ["default"] + sorted(p.stem.removeprefix("sensors_") for p in folder.glob("sensors_*.toml"))
+    except FileNotFoundError:
+        known = suite_names(sc.aircraft)
         close = difflib.get_close_matches(s.suite, known, n=1, cutoff=0.5)
         fix = (f"did you mean {close[0]!r}? " if close else "") + f"{sc.aircraft} suites: {', '.join(known)}"
         raise ScenarioError(sc.source, "sensors.suite", f"no sensor suite {s.suite!r} for {sc.aircraft}", fix) from None

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -55,11 +56,27 @@ class SensorSpec:
     quantum: float = 0.0
 
 
-def load_suite(aircraft: str, suite: str = "default") -> tuple[SensorSpec, ...]:
-    """Read ``aircraft/<aircraft>/sensors.toml`` (``suite = "default"``) or ``sensors_<suite>.toml``."""
+def suite_path(aircraft: str, suite: str = "default") -> Path:
+    """``aircraft/<aircraft>/sensors.toml`` for ``suite = "default"``, else ``sensors_<suite>.toml``."""
     base = "DHC6" if aircraft.startswith("DHC6") else aircraft
-    fname = "sensors.toml" if suite == "default" else f"sensors_{suite}.toml"
-    path = AIRCRAFT_DATA / base / fname
+    return AIRCRAFT_DATA / base / ("sensors.toml" if suite == "default" else f"sensors_{suite}.toml")
+
+
+def suite_names(aircraft: str) -> list[str]:
+    """The sensor suites shipped for ``aircraft``: ``default`` and every ``sensors_<suite>.toml``."""
+    folder = suite_path(aircraft).parent
+    return ["default"] + sorted(p.stem.removeprefix("sensors_") for p in folder.glob("sensors_*.toml"))
+
+
+def load_suite(aircraft: str, suite: str = "default") -> tuple[SensorSpec, ...]:
+    """Read the suite file :func:`suite_path` names.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such suite (the scenario loader turns it into a message with :func:`suite_names`).
+    """
+    path = suite_path(aircraft, suite)
     if not path.exists():
         raise FileNotFoundError(path)
     data = tomllib.loads(path.read_text())
