@@ -7,6 +7,7 @@ suffixed names of :mod:`fdi_sim.aircraft.properties`.
 """
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -42,6 +43,13 @@ class UnknownAircraftError(FdiSimError, KeyError):
 
     def __str__(self) -> str:
         return str(self.args[0])
+
+
+def wind_ned_fps(wind_from_deg: float, wind_speed_kts: float) -> tuple[float, float, float]:
+    """Velocity of the air mass (north, east, down) for a wind blowing *from* ``wind_from_deg`` [ft/s]."""
+    to_rad = math.radians(wind_from_deg + 180.0)  # the air moves toward from + 180 deg
+    spd = wind_speed_kts * FPS_PER_KT
+    return spd * math.cos(to_rad), spd * math.sin(to_rad), 0.0
 
 
 @dataclass(frozen=True)
@@ -313,11 +321,9 @@ class Aircraft:
         fdm["atmosphere/turb-type"] = 3 if poe else 0  # 3 = ttMilspec (Dryden, MIL-F-8785C)
         fdm["atmosphere/turbulence/milspec/severity"] = poe
         fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = w20_kts * FPS_PER_KT
-        # wind blowing FROM psi: the air moves toward psi + 180 deg (NED components)
-        spd = atm.wind_speed_kts * FPS_PER_KT
-        to = np.radians(atm.wind_from_deg + 180.0)
-        fdm["atmosphere/wind-north-fps"] = spd * np.cos(to)
-        fdm["atmosphere/wind-east-fps"] = spd * np.sin(to)
+        wn, we, _ = wind_ned_fps(atm.wind_from_deg, atm.wind_speed_kts)
+        fdm["atmosphere/wind-north-fps"] = wn
+        fdm["atmosphere/wind-east-fps"] = we
 
     def step(self) -> bool:
         """One JSBSim step of ``dt_s``; False if JSBSim asked to stop."""

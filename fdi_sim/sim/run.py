@@ -22,7 +22,9 @@ from typing import Any
 import numpy as np
 
 from fdi_sim import registry
-from fdi_sim.aircraft import COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, trim
+from fdi_sim.aircraft import (
+    COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, hold_trim_in_wind, trim,
+)
 from fdi_sim.errors import LogError, SimulationDiverged
 from fdi_sim.faults.injector import FaultInjector
 from fdi_sim.flightlog import (
@@ -204,6 +206,8 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             writer.add_metadata(METADATA_FAULTS, {"catalog": json.dumps(injector.catalog())})
         tr = trim(ac, op)
         m = sc.model
+        # the trim flew in still air: the same air-relative state, now with the ground velocity of the wind
+        hold_trim_in_wind(ac, tr, m.atmosphere.wind_from_deg, m.atmosphere.wind_speed_kts)
         ac.set_atmosphere(Atmosphere(m.atmosphere.turbulence, m.atmosphere.wind_from_deg, m.atmosphere.wind_speed_kts), jsbsim_seed)
         pilot = build_pilot(sc, tr, sensors.names)
         pilot.reset(np.random.default_rng(ss_pilot))
