@@ -67,7 +67,9 @@ def run(args: argparse.Namespace) -> int:
                 return
             v = bar_entry(pt, "step") or bar_entry(pt, "zoh") if pt.status == "ok" else None
             extra = f"bar: worst {v['worst_output']} {v['worst']:.1%}" if v else pt.reason
-            print(f"  [{i:3d}/{total}] {pt.op.label():42s} {pt.status:12s} {extra}", flush=True)
+            per_point_s = (time.perf_counter() - t0) / i
+            print(f"  [{i:3d}/{total}] {pt.op.label():42s} {pt.status:12s} {extra}  "
+                  f"({per_point_s:.2f} s/point, ETA {per_point_s * (total - i):.0f} s)", flush=True)
 
         t0 = time.perf_counter()
         schedule = linearize_grid(grid, validate=not args.no_validate, check_fglin=False if args.no_fglin else None,
