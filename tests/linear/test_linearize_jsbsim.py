@@ -310,6 +310,35 @@ def test_lifted_step_model_follows_jsbsim_at_20_hz() -> None:
             assert nrmse(y_lin[:, i], runs.dy[r, n - 1::n, i]) < 0.01, (runs.input_names[r], o)
 
 
+def test_fglinearization_is_wrong_for_the_dhc6_propeller() -> None:
+    """JSBSIM_NOTES 4.1 (a): for the DHC-6 FGLinearization's Rpm rows and throttle column are garbage.
+
+    Right after JSBSim's own trim (5000 ft, 120 KIAS; after the running trim it does not converge)
+    it gives ``d Rpm-dot / d throttle`` = -1140 rpm/s per unit (more throttle, a slower propeller: its
+    real 1/120 s step hits the turboprop's N1 -> idle reset) and an unstable propeller speed
+    (``A[Rpm, Rpm]`` = +0.107 1/s). Our model at the running trim has the governed propeller
+    settling and the throttle acting through N1, which is what the doublets validate; the airframe's
+    short period agrees (-2.254 +- 2.636j against -2.260 +- 2.635j in the notes)."""
+    ac = Aircraft("DHC6")
+    f = ac.fdm
+    f["ic/h-sl-ft"], f["ic/vc-kts"], f["ic/gamma-deg"], f["ic/psi-true-deg"] = 5000.0, 120.0, 0.0, 0.0
+    f["propulsion/set-running"] = -1
+    f.run_ic()
+    f.do_trim(1)
+    with pytest.raises(DesignError, match="not reliable for the propeller"):
+        fglinearization(ac)
+    jl = fglinearization(ac, allow_propeller=True)
+    i, j = jl.x_names.index("Rpm0"), jl.u_names.index("ThtlCmd")
+    assert jl.B[i, j] < -500.0 and jl.A[i, i] > 0.05, (jl.B[i, j], jl.A[i, i])
+    lon = [jl.x_names.index(n) for n in ("Vt", "Alpha", "Q", "Theta")]
+    fg_sp = max(np.linalg.eigvals(jl.A[np.ix_(lon, lon)]), key=abs)
+    m = linearize(Aircraft("DHC6"), DHC6_OP).model
+    r, n1, thr = m.state_names.index("prop_rpm"), m.state_names.index("n1_pct"), m.input_names.index("throttle_cmd_norm")
+    assert m.A[r, r] < 0.0 and m.A[r, n1] > 0.0 and abs(m.B[r, thr]) < 1.0 and m.B[n1, thr] > 0.0
+    sp = identify_modes(m.A, m.state_names).get("short period")[0].eigenvalue
+    assert abs(sp - fg_sp.conjugate() if fg_sp.imag * sp.imag < 0 else sp - fg_sp) / abs(fg_sp) < 0.02, (sp, fg_sp)
+
+
 def test_simulation_integrates_with_ab3() -> None:
     """Aircraft sets all four FGPropagate integrators to AB3 (4); JSBSim keeps them through trims."""
     ac = Aircraft("DHC6")
