@@ -143,7 +143,10 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
     limit = _at_limit(result)
     if not result.residual < TRIM_TOL:
         # a control at its limit is the likely cause (e.g. the iced DHC-6 at 120 KIAS: throttle 1.0)
-        why = f"; best point: {limit}" if limit else ""
+        why = f"; best point: {limit}" if limit else (
+            f"; best point (no command at its limit): alpha {math.degrees(result.alpha_rad):.2f} deg, throttle_cmd_norm "
+            f"{result.throttle_cmd_norm:.3f}, elevator_cmd_norm {result.elevator_cmd_norm:.3f}, pitch_trim_cmd_norm "
+            f"{result.pitch_trim_cmd_norm:.3f}")
         raise TrimError(ac.name, op.label(),
                         f"residual {result.residual:.3g} above {TRIM_TOL} ({jsb_error or 'no JSBSim message'}){why}")
     if limit:
