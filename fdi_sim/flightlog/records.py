@@ -7,8 +7,8 @@ u64, body) and the records named below; opcodes are the ``mcap`` library's :clas
 A Message record (op 0x05) is opcode u8 | record length u64 | channel_id u16 | sequence u32 |
 log_time u64 | publish_time u64 | data. For a vector channel the data is the CDR payload of
 :mod:`fdi_sim.flightlog.schemas` (``4 + 8 * n_fields`` bytes), so every record of the channel
-has the same size ``35 + 8 * n_fields`` and a whole chunk of them is one packed numpy
-structured array (:func:`build_chunk`).
+has the same size ``35 + 8 * n_fields`` and a whole chunk of them is laid out by numpy in
+one go (:func:`build_chunk`).
 """
 from __future__ import annotations
 
@@ -146,65 +146,60 @@ def vector_records(block: VectorBlock) -> NDArray[Any]:
     return rec
 
 
-#: per-row fields shared by every channel of a step: sequence, log time, publish time, CDR
-#: header, t_s (bytes 11..43 of each Message record)
-_ROW_HEAD = np.dtype([("sequence", "<u4"), ("log_time_ns", "<u8"), ("publish_time_ns", "<u8"),
-                      ("cdr", "V4"), ("t_s", "<f8")])
-
-
 @functools.lru_cache(maxsize=64)
-def _step_layout(ids: tuple[int, ...], n_values: tuple[int, ...]) -> tuple[np.dtype, bytes, NDArray[np.int64]]:
-    """One time step holding one Message record per channel, back to back: its dtype (the
-    variable parts only), its bytes with the constant parts filled, each record's offset."""
-    names: list[str] = []
-    formats: list[Any] = []
-    offsets: list[int] = []
-    template = b""
+def _step_layout(ids: tuple[int, ...], n_values: tuple[int, ...],
+                 n: int) -> tuple[list[NDArray[np.uint8]], NDArray[np.uint8], NDArray[np.int64], int]:
+    """Constant parts of ``n`` steps of one Message record per channel, back to back: per
+    channel the (n, 11) record start (opcode, record length, channel id), the (n, 4) CDR
+    headers, the record offsets (n, channels) in the chunk and the bytes of one step.
+    Read-only: shared between calls."""
     starts = []
-    for c, (cid, nv) in enumerate(zip(ids, n_values)):
-        base = len(template)
-        starts.append(base)
-        names += [f"h{c}", f"v{c}"]
-        formats += [_ROW_HEAD, ("<f8", (nv,))]
-        offsets += [base + 11, base + 43]
-        template += struct.pack("<BQH", Opcode.MESSAGE, 34 + 8 * nv, cid) + bytes(32 + 8 * nv)
-    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": len(template)})
-    return dtype, template, np.array(starts, dtype=np.int64)
-
-
-def _row_heads(t_s: NDArray[np.float64], log: NDArray[np.uint64], first_sequence: int) -> NDArray[Any]:
-    head = np.empty(len(t_s), dtype=_ROW_HEAD)
-    head["sequence"] = (np.arange(len(t_s), dtype=np.int64) + first_sequence) & 0xFFFFFFFF
-    head["log_time_ns"] = log
-    head["publish_time_ns"] = log
-    head["cdr"] = np.void(CDR_LE_HEADER)
-    head["t_s"] = t_s
-    return head
+    prefixes = []
+    size = 0
+    for cid, nv in zip(ids, n_values):
+        starts.append(size)
+        length = MESSAGE_HEAD.size - RECORD_HEAD_BYTES + len(CDR_LE_HEADER) + 8 * (nv + 1)
+        size += RECORD_HEAD_BYTES + length
+        pre = np.frombuffer(struct.pack("<BQH", Opcode.MESSAGE, length, cid), dtype=np.uint8)
+        prefixes.append(np.tile(pre, (n, 1)))
+    cdr = np.tile(np.frombuffer(CDR_LE_HEADER, dtype=np.uint8), (n, 1))
+    offsets = np.arange(n, dtype=np.int64)[:, None] * size + np.array(starts, dtype=np.int64)[None, :]
+    for x in (cdr, offsets, *prefixes):
+        x.flags.writeable = False
+    return prefixes, cdr, offsets, size
 
 
 def _regular_layout(blocks: list[VectorBlock]) -> tuple[bytearray, NDArray[np.uint64], NDArray[np.int64]] | None:
     """The usual chunk: every channel wrote once per step at the same, sorted times. A step
-    is then a fixed-size group of records and the chunk one structured array, filled with
-    two copies per channel. Returns the bytes, the log times (n,) and the record offsets
-    (n, channels); None if the chunk is not regular."""
+    is then a fixed-size group of records: the chunk is one ``np.concatenate`` of byte
+    columns (n, .) along the rows: per channel the constant record start, the row head shared
+    by all channels (sequence, log time, publish time, CDR header, t_s; MESSAGE_HEAD layout)
+    and the values. Returns the bytes, the log times (n,) and the record offsets (n,
+    channels); None if the chunk is not regular."""
     t0 = blocks[0].t_s
     n = len(t0)
     if not all(b.t_s is t0 or np.array_equal(b.t_s, t0) for b in blocks[1:]):
         return None
     log = log_time_ns(t0)
-    if np.any(log[1:] < log[:-1]):
+    if n > 1 and (log[1:] < log[:-1]).any():
         return None
-    dtype, template, starts = _step_layout(tuple(b.channel_id for b in blocks),
-                                           tuple(b.values.shape[1] for b in blocks))
-    buf = bytearray(template * n)
-    comb = np.frombuffer(buf, dtype=dtype)
-    heads: dict[int, NDArray[Any]] = {}
+    prefixes, cdr, offsets, step_bytes = _step_layout(
+        tuple(b.channel_id for b in blocks), tuple(b.values.shape[1] for b in blocks), n)
+    # (n, 1) little-endian numbers viewed as their (n, k) bytes
+    log_u1 = log.astype("<u8", copy=False).reshape(n, 1).view(np.uint8)
+    t_u1 = np.ascontiguousarray(t0, dtype="<f8").reshape(n, 1).view(np.uint8)
+    heads: dict[int, NDArray[np.uint8]] = {}
+    columns: list[NDArray[np.uint8]] = []
     for c, b in enumerate(blocks):
-        if b.first_sequence not in heads:
-            heads[b.first_sequence] = _row_heads(t0, log, b.first_sequence)
-        comb[f"h{c}"] = heads[b.first_sequence]
-        comb[f"v{c}"] = b.values
-    offsets = np.arange(n, dtype=np.int64)[:, None] * len(template) + starts[None, :]
+        head = heads.get(b.first_sequence)
+        if head is None:
+            # sequence u32 wraps around (MCAP spec: "sequence" is a uint32 counter)
+            seq = np.arange(n, dtype=np.uint32) + np.uint32(b.first_sequence & 0xFFFFFFFF)
+            seq_u1 = seq.astype("<u4", copy=False).reshape(n, 1).view(np.uint8)
+            head = heads[b.first_sequence] = np.concatenate((seq_u1, log_u1, log_u1, cdr, t_u1), axis=1)
+        columns += (prefixes[c], head, np.ascontiguousarray(b.values, dtype="<f8").view(np.uint8))
+    buf = bytearray(n * step_bytes)
+    np.concatenate(columns, axis=1, out=np.frombuffer(buf, dtype=np.uint8).reshape(n, -1))
     return buf, log, offsets
 
 
@@ -254,7 +249,11 @@ def build_chunk(blocks: Sequence[VectorBlock], raws: Sequence[RawMessage] = ()) 
     regular = _regular_layout(blocks) if blocks else None
     if regular is not None and not raws:  # the per-second fast path
         buf, log, offs = regular
-        index = {b.channel_id: _entries(log, offs[:, c]) for c, b in enumerate(blocks)}
+        # all channels' entries in one array: [c, i] = (log time, offset) of step i's record
+        e = np.empty((len(blocks), len(log), 2), dtype="<u8")
+        e[:, :, 0] = log
+        e[:, :, 1] = offs.T
+        index = {b.channel_id: e[c] for c, b in enumerate(blocks)}
         return ChunkPayload(buf, int(log[0]), int(log[-1]), len(log) * len(blocks), index)
     if regular is not None:
         vbytes: bytes | bytearray = regular[0]

@@ -167,11 +167,17 @@ class McapFileWriter:
         self._write(packed)
         chunk_length = self._pos - chunk_start
         index_start = self._pos
+        # the Message Index records in one write; offsets: channel id, file position of its record
+        records = []
         offsets = b""
+        pos = index_start
         for cid, entries in payload.index.items():
-            offsets += struct.pack("<HQ", cid, self._pos)
-            self._write(encode_message_index(cid, entries))
+            rec = encode_message_index(cid, entries)
+            records.append(rec)
+            offsets += struct.pack("<HQ", cid, pos)
+            pos += len(rec)
             self._counts[cid] = self._counts.get(cid, 0) + len(entries)
+        self._write(b"".join(records))
         self._chunk_indexes.append(_record(Opcode.CHUNK_INDEX, struct.pack(
             "<QQQQI", payload.message_start_ns, payload.message_end_ns, chunk_start, chunk_length,
             len(offsets)) + offsets + struct.pack("<Q", self._pos - index_start) + _string(self._compression)

@@ -444,3 +444,27 @@ def test_build_chunk_against_one_message_encoder(chans, event_ticks, same_times)
         assert (payload.message_start_ns, payload.message_end_ns) == (min(all_logs), max(all_logs))
     file_order = [struct.unpack_from("<Q", payload.records, s + 6)[0] for _, s, _ in scan_records(bytes(payload.records))]
     assert file_order == sorted(file_order)
+
+
+def test_regular_chunks_wrap_sequences_and_own_their_bytes() -> None:
+    """The per-second layout (shared, cached constant parts): u32 sequences wrap, any float
+    layout of the values is written as little-endian float64, chunks of other lengths reuse
+    nothing of an earlier payload's bytes."""
+    from fdi_sim.flightlog.records import _regular_layout
+    rng = np.random.default_rng(3)
+    firsts = {1: 2**32 - 2, 2: 5, 3: 2**32 + 3}
+    schemas = {cid: vector_schema("fdi_sim/msg/T", ("t_s",) + tuple(f"v{i}_m" for i in range(cid + 1)))
+               for cid in firsts}
+    payloads, expected = [], []
+    for n in (5, 3, 5):
+        t = (np.arange(n) + 10 * len(payloads)) / 120
+        wide = rng.standard_normal((n, 8))
+        vals = {1: wide[:, ::4].astype(">f8"), 2: wide[:, :3].astype(np.float32).astype(np.float64), 3: wide[:, 1:5]}
+        blocks = [VectorBlock(cid, firsts[cid], t, vals[cid]) for cid in firsts]
+        assert _regular_layout(blocks) is not None
+        payloads.append(build_chunk(blocks))
+        expected.append({cid: [(round(t[i] * 1e9), (firsts[cid] + i) & 0xFFFFFFFF,
+                                schemas[cid].encode(t[i], np.asarray(vals[cid][i], dtype=np.float64)))
+                               for i in range(n)] for cid in firsts})
+    for payload, exp in zip(payloads, expected):
+        assert _decode_chunk(payload) == exp
