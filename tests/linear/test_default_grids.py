@@ -1,7 +1,7 @@
 """The full default grids with the 10 s doublet validation at every point (in the default suite: about 1 min).
 
 Measured on the development machine (AB3 simulation; 2 cores shared with other jobs, session 3):
-F-16 20 points in 16 s, DHC-6 30 points in 15 s, iced DHC-6 27 points in 17 s
+F-16 20 points in 23 s (with the settled FGLinearization replay), DHC-6 30 points in 15 s, iced DHC-6 27 points in 17 s
 (``fdi-sim linearize f16``, ``fdi-sim linearize DHC6``, ``fdi-sim linearize DHC6 --grid iced``).
 
 The bar is judged on the step model (``discretize(..., method="step")``: the discrete model of
