@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 from fdi_sim.errors import DesignError
 from fdi_sim.isa import vc_from_vt
 from fdi_sim.linear.model import LinearModel, StepTerms
-from fdi_sim.linear.transform import DEFAULT_DT_S, discretize
+from fdi_sim.linear.transform import DEFAULT_DT_S, discretize, reduce
 from fdi_sim.operating_point import OperatingPoint
 
 FORMAT = "fdi-sim-model-schedule"
@@ -232,7 +232,8 @@ class ModelSchedule:
         return float(np.sqrt(np.sum((np.maximum(0.0, np.maximum(lo - s, s - hi)) / self._spacing) ** 2)))
 
     def model_at(self, op: OperatingPoint, dt_s: float = DEFAULT_DT_S, method: str = "zoh",
-                 interpolate: bool = False, max_distance: float = MAX_DISTANCE) -> ScheduledModel:
+                 interpolate: bool = False, max_distance: float = MAX_DISTANCE, reduced: bool = False
+                 ) -> ScheduledModel:
         """The discrete-time model for ``op`` (nearest point, or interpolated).
 
         Parameters
@@ -248,20 +249,47 @@ class ModelSchedule:
             Blend the enclosing triangle's models instead of taking the nearest.
         max_distance : float
             Refuse lookups farther than this from every point [grid spacings].
+        reduced : bool
+            Balanced truncation of the discrete model (:func:`fdi_sim.linear.transform.reduce`,
+            default tolerance), scaled by the point's validation: the doublet amplitudes and the
+            RMS of JSBSim's responses (:meth:`signal_scales`). Meant for the step model (51-84
+            states -> about 21).
 
         Raises
         ------
         DesignError
-            Another aircraft, an empty schedule, or a lookup too far from the grid.
+            Another aircraft, an empty schedule, a lookup too far from the grid, or ``reduced``
+            on a schedule made without validation.
         """
         if op.aircraft != self.aircraft:
             raise DesignError(f"the schedule is for {self.aircraft!r}, the operating point for {op.aircraft!r}; "
                               f"load the {op.aircraft} schedule")
         return self.lookup(self.sched_of(op), dt_s=dt_s, method=method, interpolate=interpolate,
-                           max_distance=max_distance, op=op)
+                           max_distance=max_distance, op=op, reduced=reduced)
+
+    def signal_scales(self, i: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Typical input and output sizes at point ``i`` from its validation [units of the signals].
+
+        Inputs: the doublet amplitudes; outputs: the RMS of JSBSim's doublet responses over all
+        runs (outputs no run moved get the smallest positive RMS).
+
+        Raises
+        ------
+        DesignError
+            The schedule was made without validation (``--no-validate``).
+        """
+        amps = self.meta.get("validation", {}).get("amplitudes", {})
+        val = next(iter(self.points[i].info.get("validation", {}).values()), None)
+        if val is None or not amps:
+            raise DesignError("signal scales come from the validation; this schedule was made without it "
+                              "(re-run fdi-sim linearize without --no-validate, or give reduce() the scales)")
+        su = np.array([float(amps[n]) for n in self.names["input_names"]])
+        rms = np.sqrt(np.mean(np.asarray(val["rms_nl"], dtype=float) ** 2, axis=0))
+        return su, np.where(rms > 0, rms, np.min(rms[rms > 0]))
 
     def lookup(self, s: Sequence[float], dt_s: float = DEFAULT_DT_S, method: str = "zoh", interpolate: bool = False,
-               max_distance: float = MAX_DISTANCE, op: OperatingPoint | None = None) -> ScheduledModel:
+               max_distance: float = MAX_DISTANCE, op: OperatingPoint | None = None, reduced: bool = False
+               ) -> ScheduledModel:
         """:meth:`model_at` from raw scheduling values ``(h_ft, vc_kts, flaps_deg, icing_eta)``.
 
         A running simulation uses :class:`ScheduleTracker`, which calls this only when it
@@ -293,11 +321,14 @@ class ModelSchedule:
             warnings.warn(f"{self.aircraft} schedule lookup at {where} is {dist:.2f} grid spacings from the nearest "
                           f"point, {outside:.2f} outside the grid; the linear model may not represent the aircraft "
                           "there", stacklevel=2)
-        key = (tuple(rows), tuple(round(x, 12) for x in w), dt_s, method)
+        key = (tuple(rows), tuple(round(x, 12) for x in w), dt_s, method, reduced)
         model = self._cache.get(key)
         if model is None:
             cont = self._model(self._blend([self.points[r].index for r in rows], w), op or self.points[rows[0]].op)
             model = discretize(cont, dt_s, method=method)
+            if reduced:
+                su, sy = self.signal_scales(rows[int(np.argmax(w))])
+                model = reduce(model, input_scale=su, output_scale=sy)
             if len(self._cache) < 512:
                 self._cache[key] = model
         return ScheduledModel(model=model, how=how, why=why, indices=tuple(rows), weights=tuple(w), distance=dist)
@@ -395,6 +426,8 @@ class ScheduleTracker:
         Detector sample time [s].
     method : str
         Discretization.
+    reduced : bool
+        Balanced truncation of each model (:meth:`ModelSchedule.model_at`).
     hysteresis : float
         Switching margin [grid spacings].
     max_distance : float
@@ -403,8 +436,8 @@ class ScheduleTracker:
 
     def __init__(self, schedule: ModelSchedule, flaps_deg: float = 0.0, icing_eta: float = 0.0,
                  dt_s: float = DEFAULT_DT_S, method: str = "zoh", hysteresis: float = 0.1,
-                 max_distance: float = MAX_DISTANCE) -> None:
-        self.schedule, self.dt_s, self.method = schedule, dt_s, method
+                 max_distance: float = MAX_DISTANCE, reduced: bool = False) -> None:
+        self.schedule, self.dt_s, self.method, self.reduced = schedule, dt_s, method, reduced
         self.hysteresis, self.max_distance = hysteresis, max_distance
         outs = schedule.names.get("output_names", ())
         if "h_ft" not in outs or "vc_kts" not in outs:
@@ -443,7 +476,8 @@ class ScheduleTracker:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # the distance warning is for one-off lookups
                 # raises beyond max_distance, with the distance and the nearest point
-                self.current = self.schedule.lookup(s, self.dt_s, self.method, max_distance=self.max_distance)
+                self.current = self.schedule.lookup(s, self.dt_s, self.method, max_distance=self.max_distance,
+                                                    reduced=self.reduced)
             self._cur = near
         assert self.current is not None
         return self.current
