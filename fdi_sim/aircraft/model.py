@@ -314,7 +314,16 @@ class Aircraft:
 
     # ------------------------------------------------------------------ atmosphere and stepping
     def set_atmosphere(self, atm: Atmosphere, seed: int) -> None:
-        """Set steady wind and turbulence; ``seed`` seeds JSBSim's own random generator."""
+        """Set steady wind and turbulence; ``seed`` seeds JSBSim's own random generator.
+
+        A trimmed aircraft is first re-initialized in the wind by
+        :func:`~fdi_sim.aircraft.wind.hold_trim_in_wind` (switching the wind on alone moves the air
+        data by the wind vector). JSBSim generates the MIL-F-8785C turbulence in the axes of the
+        mean wind (``FGWinds::Turbulence`` turns it by the azimuth the wind blows toward), so the
+        same seed with another wind direction gives the same gusts turned: a run with a wind and
+        one without part from the first steps (measured: DHC-6 120 KCAS, moderate, 20 kt from 45 deg:
+        1.4 kt apart after 3 steps).
+        """
         fdm = self.fdm
         fdm["simulation/randomseed"] = int(seed) % (2**31 - 1)
         poe, w20_kts = TURBULENCE_LEVELS[atm.turbulence]

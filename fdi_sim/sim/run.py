@@ -205,10 +205,11 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
                 op = dataclasses.replace(op, icing_eta=eta0)
             writer.add_metadata(METADATA_FAULTS, {"catalog": json.dumps(injector.catalog())})
         tr = trim(ac, op)
-        m = sc.model
+        a = sc.model.atmosphere
+        atm = Atmosphere(a.turbulence, a.wind_from_deg, a.wind_speed_kts)
         # the trim flew in still air: the same air-relative state, now with the ground velocity of the wind
-        hold_trim_in_wind(ac, tr, m.atmosphere.wind_from_deg, m.atmosphere.wind_speed_kts)
-        ac.set_atmosphere(Atmosphere(m.atmosphere.turbulence, m.atmosphere.wind_from_deg, m.atmosphere.wind_speed_kts), jsbsim_seed)
+        hold_trim_in_wind(ac, tr, atm.wind_from_deg, atm.wind_speed_kts)
+        ac.set_atmosphere(atm, jsbsim_seed)
         pilot = build_pilot(sc, tr, sensors.names)
         pilot.reset(np.random.default_rng(ss_pilot))
         ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + TRUTH_SIGNALS)
