@@ -55,14 +55,15 @@ class FaultParams(ProfileParams):
 
     def _unit_fix(self, key: str, prefix: str, unit: str) -> str:
         """The message for a magnitude key with an unknown unit: the units of this target, the nearest one."""
-        try:
+        rate = self.MAGNITUDES[prefix][1]
+        try:  # the family is the type id's first word (actuator-..., sensor-...; the catalogue imports this module)
             native = target_unit(self.type.split("-", 1)[0], self.target)
         except KeyError:  # a target with no unit suffix: check_faults names it later
             native = None
-        units = allowed_units(native, self.MAGNITUDES[prefix][1]) if native else tuple(sorted(_UNIT_DIM))
+        units = allowed_units(native, rate) if native else tuple(sorted(_UNIT_DIM))
         near = difflib.get_close_matches(unit, units, n=1, cutoff=0.5)
         hint = f"did you mean {prefix}_{near[0]}? " if near else ""
-        where = f"on {self.target} ({native}{' per second' if self.MAGNITUDES[prefix][1] else ''})" if native else "here"
+        where = f"on {self.target} ({native}{' per second' if rate else ''})" if native else "here"
         return f"{key!r}: unknown unit {unit!r}; {hint}{prefix}_<unit> takes {where} one of: {', '.join(units)}"
 
     def magnitude(self, prefix: str) -> tuple[float, str] | None:

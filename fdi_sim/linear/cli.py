@@ -61,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
             grid = replace(grid, validation=replace(grid.validation, duration_s=args.duration))
         n = len(grid.points)
         print(f"linearizing {n} {name} points from {grid.source}", flush=True)
+        t0 = time.perf_counter()
 
         def progress(i: int, total: int, pt: Any) -> None:
             if args.quiet:
@@ -71,7 +72,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"  [{i:3d}/{total}] {pt.op.label():42s} {pt.status:12s} {extra}  "
                   f"({per_point_s:.2f} s/point, ETA {per_point_s * (total - i):.0f} s)", flush=True)
 
-        t0 = time.perf_counter()
         schedule = linearize_grid(grid, validate=not args.no_validate, check_fglin=False if args.no_fglin else None,
                                   progress=progress)
         out = Path(args.out)

@@ -279,6 +279,7 @@ class ModelSchedule:
             The schedule was made without validation (``--no-validate``).
         """
         amps = self.meta.get("validation", {}).get("amplitudes", {})
+        # any discretization's entry: rms_nl is of JSBSim's runs, the same for all
         val = next(iter(self.points[i].info.get("validation", {}).values()), None)
         if val is None or not amps:
             raise DesignError("signal scales come from the validation; this schedule was made without it "

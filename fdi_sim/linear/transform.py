@@ -191,8 +191,10 @@ def reduce(model: LinearModel, order: int | None = None, *, rel_tol: float = 1e-
     Returns
     -------
     LinearModel
-        States ``bal<i>`` (balanced coordinates, no physical meaning); ``meta["reduced"]`` holds
-        the original order, the kept order and the Hankel singular values.
+        States ``bal<i>`` (the kept slow modes in real Schur form, then balanced coordinates; no
+        physical meaning), no step terms; ``meta["reduced"]`` holds the original order, the kept
+        order, the number of slow modes kept and the Hankel singular values of the scaled fast
+        part (``meta["lag_states"]`` is dropped: those states are gone).
 
     Raises
     ------
@@ -234,6 +236,7 @@ def reduce(model: LinearModel, order: int | None = None, *, rel_tol: float = 1e-
         A=Ar, B=Br, C=Cr, D=model.D.copy(), dt_s=model.dt_s, state_names=tuple(f"bal{i}" for i in range(nr)),
         input_names=model.input_names, output_names=model.output_names, input_kinds=model.input_kinds,
         u0=model.u0, y0=model.y0, op=model.op,
-        meta={**model.meta, "reduced": {"from_states": n, "states": int(nr), "unstable_kept": int(n_unstable),
-                                        "hankel_sv": [float(h) for h in hsv[:ns]]}},
+        meta={**{k: v for k, v in model.meta.items() if k != "lag_states"},
+              "reduced": {"from_states": n, "states": int(nr), "unstable_kept": int(n_unstable),
+                          "hankel_sv": [float(h) for h in hsv[:ns]]}},
     )

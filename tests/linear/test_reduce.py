@@ -60,6 +60,23 @@ def test_error_is_within_the_hankel_bound_and_integrators_stay(discrete: bool) -
     assert auto.n_states == 1 + int(np.sum(hsv >= 1e-3 * hsv[0]))
 
 
+@pytest.mark.parametrize("discrete", [True, False])
+def test_modes_slower_than_the_split_are_kept_exactly(discrete: bool) -> None:
+    """A stable 500 s mode is slower than ``keep_slower_than_s`` (100 s): kept as it is with the
+    integrator, beside the fast part; at 1000 s it is balanced with the rest."""
+    poles = np.array([0.0, -1.0 / 500.0, -0.5, -2.0, -8.0, -30.0])
+    rng = np.random.default_rng(7)
+    m = LinearModel(A=np.diag(poles), B=rng.normal(size=(6, 1)), C=rng.normal(size=(2, 6)), D=np.zeros((2, 1)))
+    if discrete:
+        m = discretize(m, 0.01)
+    r = reduce(m, 4)
+    assert r.meta["reduced"]["unstable_kept"] == 2 and len(r.meta["reduced"]["hankel_sv"]) == 4
+    slow = np.exp(poles[:2] * 0.01) if discrete else poles[:2]
+    eig = np.linalg.eigvals(r.A)
+    assert all(np.min(np.abs(eig - z)) < 1e-9 for z in slow), eig
+    assert reduce(m, 4, keep_slower_than_s=1000.0).meta["reduced"]["unstable_kept"] == 1
+
+
 def test_bad_input() -> None:
     m = LinearModel(A=-np.eye(3), B=np.ones((3, 1)), C=np.ones((2, 3)), D=np.zeros((2, 1)))
     with pytest.raises(DesignError, match="between 1 and"):
@@ -89,6 +106,7 @@ def test_step_model_reduced_validates_like_the_full_one(name: str, op: Operating
         return float(np.max(compare(md, runs).nrmse_without(("throttle_cmd_norm",))))
 
     assert full.n_states > 45 and red.n_states <= 25, (full.n_states, red.n_states)
+    assert "lag_states" in full.meta and "lag_states" not in red.meta  # the shift registers are gone
     assert worst(red) < min(worst(full) + 0.002, 0.05), (worst(full), worst(red))
     assert worst(reduce(full, 10, input_scale=su, output_scale=sy)) > 0.05
 
