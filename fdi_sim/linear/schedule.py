@@ -37,7 +37,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -332,6 +332,8 @@ class ModelSchedule:
                 model = reduce(model, input_scale=su, output_scale=sy)
             if len(self._cache) < 512:
                 self._cache[key] = model
+        if op is not None and model.op is not op:  # the cache is per grid point; the answer names this lookup's point
+            model = replace(model, op=op)
         return ScheduledModel(model=model, how=how, why=why, indices=tuple(rows), weights=tuple(w), distance=dist)
 
     def _triangle(self, s: NDArray[np.float64]) -> tuple[list[int], list[float]] | None:

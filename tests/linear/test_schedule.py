@@ -84,7 +84,7 @@ def test_nearest_lookup_returns_that_points_discrete_model() -> None:
                                  output_names=OUTS, meta={"lagged_outputs": ["nz_g"]}), 1 / 120)
     np.testing.assert_allclose(r.model.A, ref.A, rtol=1e-12)
     assert r.model.dt_s == pytest.approx(1 / 120) and r.model.state_names[-1] == "nz_lag_g"
-    assert s.model_at(OperatingPoint("f16", 10400.0, vc_kts=303.0)).model is r.model  # cached
+    assert s.model_at(OperatingPoint("f16", 10400.0, vc_kts=303.0)).model.A is r.model.A  # cached matrices
 
 
 def test_interpolation_is_exact_for_a_linear_field() -> None:
@@ -96,6 +96,16 @@ def test_interpolation_is_exact_for_a_linear_field() -> None:
     np.testing.assert_allclose(cont.A, field_A(8000.0, 293.0), rtol=1e-10)
     out = s.lookup([16000.0, 300.0, 0.0, 0.0], interpolate=True)  # outside the hull: nearest, said so
     assert out.how == "nearest" and "outside" in out.why
+
+
+def test_cached_lookups_name_their_own_operating_point() -> None:
+    """Two lookups that land on the same grid point share its cached matrices but each answer
+    carries the operating point it was asked for."""
+    s = make_schedule()
+    a, b = OperatingPoint("f16", 9800.0, vc_kts=301.0), OperatingPoint("f16", 10100.0, vc_kts=299.0)
+    ra, rb = s.model_at(a), s.model_at(b)
+    assert ra.indices == rb.indices and ra.model.A is rb.model.A
+    assert ra.model.op is a and rb.model.op is b
 
 
 def test_far_lookups_warn_then_refuse() -> None:
