@@ -60,3 +60,17 @@ def test_icing_eta_column_is_the_drag_of_the_iced_cd0() -> None:
     dvt = m.B[m.state_names.index("vt_fps"), j]
     assert dvt == pytest.approx(expected, rel=0.10)
     assert m.B[m.state_names.index("q_radps"), j] != 0.0  # ice also changes the pitch moment
+
+
+def test_failed_trim_without_a_limit_reports_its_best_point() -> None:
+    """2000 ft / 120 KCAS with eta 0.1: the Newton trim stops without any command at its stop;
+    the reason then gives the best point it found (measured: throttle 0.936, residual 0.79)."""
+    from fdi_sim.aircraft import trim
+    from fdi_sim.errors import TrimError
+
+    ac = Aircraft("DHC6", icing=True)
+    with pytest.raises(TrimError) as e:
+        trim(ac, OperatingPoint("DHC6", 2000.0, vc_kts=120.0, icing_eta=0.1))
+    msg = str(e.value)
+    assert "residual" in msg and "best point (no command at its limit): alpha" in msg
+    assert "throttle_cmd_norm 0.9" in msg and "pitch_trim_cmd_norm" in msg
