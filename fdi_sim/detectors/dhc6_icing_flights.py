@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from fdi_sim.aircraft.linearize import FDSettings
 from fdi_sim.aircraft.model import Aircraft
+from fdi_sim.detectors.pca import series_windows, sliding_windows
 from fdi_sim.errors import DesignError
 from fdi_sim.flightlog import (
     TOPIC_COMMANDS,
@@ -360,15 +361,11 @@ def windows(fs: FlightSamples, ref: LinearModel, order_s: int, skip_s: float = 0
     """
     L = order_s + 1
     cu = list(ref.control_columns())
-    dy = fs.y - ref.y0
-    du = fs.u - ref.u0[cu]
-    n = len(fs.t_s)
-    idx = np.arange(order_s, n)
-    Y = np.concatenate([dy[idx - order_s + j] for j in range(L)], axis=1)
-    U = np.concatenate([du[idx - order_s + j] for j in range(L)], axis=1)
-    f = np.all(np.stack([fs.fault[idx - order_s + j] for j in range(L)]), axis=0)
-    keep = fs.t_s[idx] >= skip_s
-    return np.hstack([Y, U])[keep], f[keep], fs.t_s[idx][keep]
+    X = series_windows(fs.u, fs.y, L, ref.u0[cu], ref.y0)  # row k: the window ending at sample k + s
+    f = sliding_windows(fs.fault, L).all(axis=1)
+    t_s = fs.t_s[order_s:]
+    keep = t_s >= skip_s
+    return X[keep], f[keep], t_s[keep]
 
 
 # ---------------------------------------------------------------------------- flight plan

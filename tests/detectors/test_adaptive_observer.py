@@ -244,6 +244,47 @@ def test_fig_8_needs_gains_of_a_thousand_per_second() -> None:
     assert ok.any() and g3[ok].max(axis=1).min() > 1000.0
 
 
+def test_bars_and_examples_are_the_text_of_sec_VI() -> None:
+    """Limits, time windows and example data of sidar_bars / simulate_sidar against Sidar 1982 (seed
+    ``004``), sec. VI "Discussion of simulation results" (a) and (b); a wrong constant fails here, not
+    silently in the reproduction tests that use them.
+
+    Fig. 6: "less than 4x10^-3 after 3.5 sec", "within 95% accuracy, after 8 sec.". Fig. 7: ramps a
+    1.0 -> 3.2 over 1-12 s, b 2.0 -> 3.6 over 4-12 s; "during the tracking phase ... less than
+    2.5x10^-2" (from fig. 6's 3.5 s on: our reading), "one second after the end of the parameter
+    variations ... less than 4x10^-3 ... better than 90%", "steady state ... 98-99%". Fig. 8: "less than
+    5x10^-2, after 2.75 sec", "less than 10%, after 10 sec.". Fig. 9: tracking "less than 2x10^-2",
+    after t = 12 "less than 10^-2 within 1.4 sec", "less than 10%, within 2.5 sec".
+    """
+    from fdi_sim.detectors.sidar_examples import SidarBatch
+
+    inf = np.inf
+    expected = {  # figure: (limit, window start [s], window end [s]) per statement, in order
+        6: [(4e-3, 3.5, inf), (0.05, 8.0, inf)],
+        7: [(2.5e-2, 3.5, 12.0), (4e-3, 13.0, inf), (0.10, 13.0, 13.0), (0.02, 20.0, inf)],
+        8: [(5e-2, 2.75, inf), (0.10, 10.0, inf)],
+        9: [(2e-2, 2.75, 12.0), (1e-2, 13.4, inf), (0.10, 14.5, inf)],
+    }
+    t = np.arange(401) * 0.05  # 0..20 s
+    e = np.stack([np.exp(-t), t])  # row 0 falls (its max is at a window's start), row 1 rises (at its end)
+    for fig, bars in expected.items():
+        example, tracking = (1 if fig < 8 else 2), fig in (7, 9)
+        theta = np.ones((t.size, example + 1))
+        hat = theta[None] * (1.0 + e[:, :, None])  # relative error e(t) of every parameter, and of the norm
+        run = SidarBatch(example, tracking, SidarReading(), np.ones((2, example + 1)), t, e, hat, theta, ("a",) * (example + 1))
+        got = sidar_bars(run)
+        assert [b.figure for b in got] == [fig] * len(bars)
+        for b, (limit, t0, t1) in zip(got, bars):
+            assert b.limit == limit, (fig, b.text)
+            np.testing.assert_allclose(b.measured, [np.exp(-t0), min(t1, t[-1])], rtol=1e-9, atol=1e-12, err_msg=f"fig. {fig}: {b.text}")
+    ramps = simulate_sidar(1, np.array(STATED_1), True, SidarReading(law="euler"), 13.0)
+    at = {tt: ramps.params_true[np.argmin(np.abs(ramps.t_s - tt))] for tt in (0.0, 1.0, 4.0, 12.0, 13.0)}
+    np.testing.assert_allclose([at[tt] for tt in at], [[1, 2], [1, 2], [1.6, 2], [3.2, 3.6], [3.2, 3.6]], atol=1e-12)
+    ex2 = simulate_sidar(2, np.array(UNITY_2), reading=SidarReading(law="euler"), t_end_s=0.1)
+    np.testing.assert_allclose(ex2.params_true[0], [1.0, 1.0, 3.0])  # a_n, b_n, c_n
+    np.testing.assert_allclose(ex2.params_hat[0, 0], [0.5, 0.5, 2.0])  # a_0(0), b_0(0), c_0(0)
+
+
 def test_bad_input() -> None:
     model = LinearModel(A=-np.eye(2), B=np.ones((2, 1)), C=np.eye(2), D=np.zeros((2, 1)))
     with pytest.raises(DesignError, match="input_hold"):
