@@ -12,7 +12,11 @@ from pathlib import Path
 AIRCRAFT_DATA: Path = Path(__file__).resolve().parent / "_aircraft"
 
 
+def aircraft_base(aircraft: str) -> str:
+    """The aircraft whose data and signal tables ``aircraft`` uses (``"DHC6..."`` variants share the DHC-6's)."""
+    return "DHC6" if aircraft.startswith("DHC6") else aircraft
+
+
 def aircraft_file(aircraft: str, name: str) -> Path:
     """``aircraft/<aircraft>/<name>`` (``"DHC6..."`` variants share the DHC-6 folder)."""
-    base = "DHC6" if aircraft.startswith("DHC6") else aircraft
-    return AIRCRAFT_DATA / base / name
+    return AIRCRAFT_DATA / aircraft_base(aircraft) / name

@@ -33,19 +33,19 @@ import functools
 import shutil
 import tomllib
 import xml.etree.ElementTree as ET
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
 from fdi_sim.aircraft.model import iced_model_name
 from fdi_sim.aircraft.overlays import GENERATORS
-from fdi_sim.data import AIRCRAFT_DATA  # aircraft/ in a checkout, packaged in a wheel
+from fdi_sim.data import aircraft_file  # aircraft/ in a checkout, packaged in a wheel
 from fdi_sim.errors import FdiSimError
 
-#: folder of the per-aircraft data files
 #: aircraft with an icing overlay -> JSBSim model name of the overlay
 ICED_MODELS: Mapping[str, str] = MappingProxyType({n: iced_model_name(n) for n in ("DHC6", "f16")})
 #: the parts of an aero function a k can scale; ``T`` is the function's one table
@@ -156,7 +156,7 @@ class IcingData:
 # ---------------------------------------------------------------------- data files
 def data_path(aircraft: str) -> Path:
     """``aircraft/<name>/icing.toml`` [path]."""
-    return AIRCRAFT_DATA / aircraft / "icing.toml"
+    return aircraft_file(aircraft, "icing.toml")
 
 
 @functools.lru_cache(maxsize=None)
@@ -174,21 +174,20 @@ def icing_data(aircraft: str) -> IcingData:
     path = data_path(aircraft)
     raw = tomllib.loads(path.read_text())
     where = str(path)
-    terms: list[IcingTerm] = []
+    scaled: list[tuple[str, str, str]] = []  # (k name, function, part) in file order
     uiuc: dict[str, str] = {}
-    per_function: dict[str, int] = {}
     for k_name, spec in raw["coefficients"].items():
         uiuc[k_name] = str(spec.get("uiuc", ""))
         for function, part in spec["functions"]:
             if part not in PARTS:
                 raise IcingDataError(f"{where}: coefficients.{k_name}: unknown part {part!r}; parts: {', '.join(PARTS)}")
-            per_function[function] = per_function.get(function, 0) + 1
-            terms.append(IcingTerm(k_name, function, part, ""))
+            scaled.append((k_name, function, part))
     # one increment per (function, k): '<F>_ice', or '<F>_ice_<X>' when one function is split
-    terms = [IcingTerm(t.k_name, t.function, t.part,
-                       f"{t.function}_ice" if per_function[t.function] == 1 else f"{t.function}_ice_{t.k_name}")
-             for t in terms]
-    k_names = tuple(dict.fromkeys(t.k_name for t in terms))
+    per_function = Counter(function for _, function, _ in scaled)
+    terms = [IcingTerm(k_name, function, part,
+                       f"{function}_ice" if per_function[function] == 1 else f"{function}_ice_{k_name}")
+             for k_name, function, part in scaled]
+    k_names = tuple(dict.fromkeys(k_name for k_name, _, _ in scaled))
     regions: dict[str, IcingRegion] = {}
     for name, reg in raw["regions"].items():
         k = {n: float(v) for n, v in reg["k"].items()}
@@ -396,20 +395,14 @@ def _build(aircraft: str, dst_root: Path) -> None:
     tree.write(path, encoding="utf-8", xml_declaration=True)
 
 
-def build_dhc6_iced(wheel_root: Path, dst_root: Path) -> None:
-    """Overlay builder (:data:`~fdi_sim.aircraft.overlays.GENERATORS`): ``aircraft/DHC6_iced``."""
-    _build("DHC6", dst_root)
+def _builder(aircraft: str) -> Callable[[Path, Path], None]:
+    """Overlay builder (:data:`~fdi_sim.aircraft.overlays.GENERATORS`) of ``aircraft/<aircraft>_iced``."""
+    def build(wheel_root: Path, dst_root: Path) -> None:
+        _build(aircraft, dst_root)
+
+    # what the builder reads: the overlay cache key includes it, so an edited icing.toml rebuilds the root
+    build.data_files = (data_path(aircraft),)  # type: ignore[attr-defined]
+    return build
 
 
-def build_f16_iced(wheel_root: Path, dst_root: Path) -> None:
-    """Overlay builder (:data:`~fdi_sim.aircraft.overlays.GENERATORS`): ``aircraft/f16_iced``."""
-    _build("f16", dst_root)
-
-
-# The overlay cache is keyed on this module's source, not yet on the data files: after editing an
-# icing.toml, delete the cache folder (overlays._cache_base()) or set FDI_SIM_CACHE elsewhere.
-# ``data_files`` names what a builder reads, for the cache key to include.
-build_dhc6_iced.data_files = (data_path("DHC6"),)  # type: ignore[attr-defined]
-build_f16_iced.data_files = (data_path("f16"),)  # type: ignore[attr-defined]
-GENERATORS[ICED_MODELS["DHC6"]] = build_dhc6_iced
-GENERATORS[ICED_MODELS["f16"]] = build_f16_iced
+GENERATORS.update({iced: _builder(name) for name, iced in ICED_MODELS.items()})

@@ -477,7 +477,7 @@ def pass_jacobians(ac: Aircraft, ts: TrimState, A: NDArray[np.float64], B: NDArr
              **{nm: st for nm, (_, st) in extra.items()}}
     Fu = np.zeros((P, nr, len(input_names)))
     Yu = np.zeros((P, len(LAGGED_OUTPUTS), len(input_names)))
-    cols = [BODY_STATES.index(c) for c in BODY_STATES[3:]]
+    cols = range(3, nr)  # rates, attitude, altitude: the states after the body velocity
     Rx = np.zeros((P, nr, len(cols)))
     nodes = _fcs_output_nodes(ac)
     fdm.set_dt(settings.dt_eval_s)

@@ -13,15 +13,13 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.aircraft.linearize import FDSettings, _Evaluator, engine_model
+from fdi_sim.aircraft.linearize import _PSI, FDSettings, _Evaluator, engine_model
 from fdi_sim.aircraft.linearize_state import (
     BODY_STATES, CONTROL_INPUTS, GUST_INPUTS, GUST_PROPS, OPTIONAL_DISTURBANCES, SENSOR_OUTPUTS, TrimState,
     command_props, engine_reader, restore_trim,
 )
 from fdi_sim.aircraft.model import Aircraft
 from fdi_sim.errors import DesignError
-
-_PSI = BODY_STATES.index("psi_rad")
 
 
 @dataclass(frozen=True)

@@ -76,38 +76,39 @@ def iced_model_name(name: str) -> str:
     return f"{name}_iced"
 
 
+#: the node attribute a held surface clears (FGPropertyNode WRITE flag)
+_WRITE = jsbsim.Attribute.WRITE
+
+
 class SurfaceHandle:
     """Takes a control surface away from the FCS (JSBSIM_NOTES sec. 3.4, the WRITE-attribute trick).
 
     While held, the FCS's writes to the position nodes fail silently, so the aero model flies the
     value given to :meth:`hold`. The FCS keeps computing the healthy position in its component's
-    own node (:meth:`healthy`); a value set before ``run()`` from the healthy value of the last
+    own node (``healthy()``); a value set before ``run()`` from the healthy value of the last
     frame lags the healthy actuator by one step.
     """
 
     def __init__(self, spec: SurfaceSpec, nodes: list, healthy: object) -> None:
         self.spec = spec
-        self._nodes = nodes
-        self._healthy = healthy.get_double_value
-        self.position = nodes[0].get_double_value  # the value the aero model flies [rad]
+        # per node: its attribute setter, value setter and scale (bound once: hold runs every step)
+        self._writes = [(n.set_attribute, n.set_double_value, spec.scale(i)) for i, n in enumerate(nodes)]
+        self.healthy: Callable[[], float] = healthy.get_double_value  # what the healthy FCS commands now [rad]
+        self.position: Callable[[], float] = nodes[0].get_double_value  # the value the aero model flies [rad]
         self.held = False
-
-    def healthy(self) -> float:
-        """Position the healthy FCS commands now [rad]."""
-        return self._healthy()
 
     def hold(self, value_rad: float) -> None:
         """Fly ``value_rad`` [rad] until the next call or :meth:`release`."""
-        for i, n in enumerate(self._nodes):
-            n.set_attribute(jsbsim.Attribute.WRITE, True)
-            n.set_double_value(value_rad * self.spec.scale(i))
-            n.set_attribute(jsbsim.Attribute.WRITE, False)
+        for set_attribute, set_value, scale in self._writes:
+            set_attribute(_WRITE, True)
+            set_value(value_rad * scale)
+            set_attribute(_WRITE, False)
         self.held = True
 
     def release(self) -> None:
         """Give the surface back to the FCS (it writes the healthy value from the next step on)."""
-        for n in self._nodes:
-            n.set_attribute(jsbsim.Attribute.WRITE, True)
+        for set_attribute, _, _ in self._writes:
+            set_attribute(_WRITE, True)
         self.held = False
 
 
@@ -174,6 +175,13 @@ class Aircraft:
     def signal_names(self) -> tuple[str, ...]:
         return tuple(self._map)
 
+    def _signal_props(self, name: str) -> tuple[str, ...]:
+        """The JSBSim properties of one signal (several: the signal is their sum)."""
+        if name not in self._map:
+            raise KeyError(f"unknown signal {name!r} for {self.name}")
+        props = self._map[name]
+        return (props,) if isinstance(props, str) else props
+
     def reader(self, names: Sequence[str]) -> Callable[[], NDArray[np.float64]]:
         """A fast closure returning the named signals as a new float64 array.
 
@@ -181,10 +189,7 @@ class Aircraft:
         """
         getters: list[Callable[[], float]] = []
         for name in names:
-            if name not in self._map:
-                raise KeyError(f"unknown signal {name!r} for {self.name}")
-            props = self._map[name]
-            parts = [self.node(p).get_double_value for p in ((props,) if isinstance(props, str) else props)]
+            parts = [self.node(p).get_double_value for p in self._signal_props(name)]
             if len(parts) == 1:
                 getters.append(parts[0])
             else:
@@ -206,10 +211,7 @@ class Aircraft:
         nodes: list[object] = []
         sums: list[tuple[int, int]] = []  # summed signals: (first, end) index into the flat reads
         for name in names:
-            if name not in self._map:
-                raise KeyError(f"unknown signal {name!r} for {self.name}")
-            props = self._map[name]
-            props = (props,) if isinstance(props, str) else props
+            props = self._signal_props(name)
             if len(props) > 1:
                 sums.append((len(nodes), len(nodes) + len(props)))
             nodes.extend(self.node(p) for p in props)

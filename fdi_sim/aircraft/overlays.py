@@ -3,7 +3,8 @@
 fdi-sim never edits the wheel. It builds a JSBSim root folder (``aircraft/``, ``engine/``,
 ``systems/``) in a cache: the wheel's ``engine`` and ``systems`` are linked, each aircraft is a
 copy of the wheel's folder with the XML patches listed here applied. The folder name carries a
-hash of the jsbsim version and of this module's patch list, so a changed patch builds anew.
+hash of the jsbsim version, of this module's patch list and of each generator's module and data
+files, so a changed patch, generator or data file builds anew.
 
 Patches
 -------
@@ -17,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
+import sys
 import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -40,7 +42,8 @@ PATCHES: dict[str, tuple[str, Callable[[ET.Element], None]]] = {
     "f16": ("f16.xml", _patch_f16),
 }
 
-# Extra aircraft generators (e.g. the iced DHC-6) register here: name -> builder(dst_root)
+# Extra aircraft generators (e.g. the iced DHC-6) register here: name -> builder(wheel_root, dst_root);
+# a builder's optional ``data_files`` attribute names the files it reads (part of the cache key)
 GENERATORS: dict[str, Callable[[Path, Path], None]] = {}
 
 
@@ -55,8 +58,6 @@ def _fingerprint() -> str:
     h.update(Path(__file__).read_bytes())
     for gen in GENERATORS.values():
         mod = getattr(gen, "__module__", "")
-        import sys
-
         f = getattr(sys.modules.get(mod), "__file__", None)
         if f:
             h.update(Path(f).read_bytes())

@@ -9,6 +9,8 @@ import math
 from dataclasses import dataclass
 from types import MappingProxyType
 
+from fdi_sim.data import aircraft_base
+
 # name -> JSBSim property, common to both aircraft
 _COMMON: dict[str, str] = {
     "t_s": "simulation/sim-time-sec",
@@ -171,7 +173,7 @@ ENGINE_COUNT: dict[str, int] = {"f16": 1, "DHC6": 2}
 
 def surfaces(aircraft: str) -> dict[str, SurfaceSpec]:
     """The fault-injectable surfaces of an aircraft, by target name."""
-    return SURFACES["DHC6" if aircraft.startswith("DHC6") else aircraft]
+    return SURFACES[aircraft_base(aircraft)]
 
 
 def property_map(aircraft: str) -> MappingProxyType[str, str | tuple[str, ...]]:
@@ -179,7 +181,7 @@ def property_map(aircraft: str) -> MappingProxyType[str, str | tuple[str, ...]]:
 
     A tuple of properties means the signal is their sum (thrust of several engines).
     """
-    base = "DHC6" if aircraft.startswith("DHC6") else aircraft
+    base = aircraft_base(aircraft)
     if base not in _PER_AIRCRAFT:
         raise KeyError(aircraft)
     return MappingProxyType({**_COMMON, **_PER_AIRCRAFT[base]})

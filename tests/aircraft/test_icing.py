@@ -10,9 +10,9 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from fdi_sim.aircraft import Aircraft, trim
+from fdi_sim.aircraft import Aircraft, overlays, trim
 from fdi_sim.aircraft.icing import (
-    ICED_MODELS, IcingDataError, _parse_table, eta_max, icing_data, k_values, regions,
+    ICED_MODELS, IcingDataError, _parse_table, data_path, eta_max, icing_data, k_values, regions,
 )
 from fdi_sim.aircraft.overlays import jsbsim_root
 from fdi_sim.errors import TrimError
@@ -93,6 +93,20 @@ def test_k_properties_as_documented(name: str) -> None:
     assert all(ac[f"icing/k-{x}"] == v for x, v in tail.items())
     assert not Aircraft(name).fdm.get_property_manager().hasNode("icing/eta")  # the clean model has none
     assert ICED_MODELS[name] == f"{name}_iced"
+
+
+def test_overlay_cache_key_follows_the_icing_data(tmp_path, monkeypatch) -> None:
+    """The JSBSim root is keyed on the contents of each builder's data file: the same bytes elsewhere
+    give the same root, an edited k a new one (else a stale iced model would keep the old k)."""
+    build = overlays.GENERATORS[ICED_MODELS["DHC6"]]
+    assert tuple(build.data_files) == (data_path("DHC6"),)
+    before = overlays._fingerprint()
+    copy = tmp_path / "icing.toml"
+    copy.write_bytes(data_path("DHC6").read_bytes())
+    monkeypatch.setattr(build, "data_files", (copy,))
+    assert overlays._fingerprint() == before
+    copy.write_text(copy.read_text().replace("CmDe = -1.48148", "CmDe = -1.5", 1))
+    assert overlays._fingerprint() != before
 
 
 # ---------------------------------------------------------------------- eta = 0 is the clean model
