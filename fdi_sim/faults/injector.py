@@ -23,6 +23,7 @@ is how detectors see it (stale value plus a validity bit, as on an ARINC 429 / A
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -30,7 +31,7 @@ import numpy as np
 
 from fdi_sim.faults.laws import actuator_value
 from fdi_sim.faults.params import FaultParams
-from fdi_sim.faults.profile import Profile, make_profile
+from fdi_sim.faults.profile import Profile, make_profile, ramp_level
 from fdi_sim.faults.quantities import target_unit, to_native
 
 #: fastest throttle-lever travel assumed for a hard-over [1/s] (full travel in 0.5 s)
@@ -98,6 +99,8 @@ class _Bound:
         self.error = 0.0
         self.t_on = 0.0
         self._i = 0
+        # level and activity stay as they are (and no onset or clear comes) while t_s < steady_until_s [s]
+        self.steady_until_s = -math.inf
         self.c: dict[str, Any] = {}  # the law's constants and state, native units (set by the injector)
         self.rng = np.random.default_rng(0)
 
@@ -105,9 +108,11 @@ class _Bound:
         self.profile = make_profile(self.d.params, duration_s, rng)
         self.level, self.error, self.t_on, self._i = 0.0, 0.0, 0.0, 0
         self.active = self.onset = self.cleared = False
+        self.steady_until_s = -math.inf
 
     def update(self, t_s: float) -> None:
-        """Level, activity and onset/clear flags at ``t_s`` [s] (windows walked incrementally)."""
+        """Level, activity and onset/clear flags at ``t_s`` [s] (windows walked incrementally, time
+        never going back), and until when they stay so (:attr:`steady_until_s`)."""
         w = self.profile.windows
         was = self.active
         while self._i < len(w) and t_s >= w[self._i][1]:
@@ -115,12 +120,18 @@ class _Bound:
         self.active = self._i < len(w) and t_s >= w[self._i][0]
         self.level = 0.0
         if self.active:
-            a, r = w[self._i][0], self.profile.ramp_s
-            self.level = min(1.0, (t_s - a) / r) if r > 0 else 1.0
+            a = w[self._i][0]
+            self.level = ramp_level(t_s - a, self.profile.ramp_s)
             if not was:
                 self.t_on = a
         self.onset = self.active and not was
         self.cleared = was and not self.active
+        if self.onset or self.cleared or (self.active and self.level < 1.0):  # the flags drop / the ramp moves next step
+            self.steady_until_s = -math.inf
+        elif self.active:  # at full level until the window ends
+            self.steady_until_s = w[self._i][1]
+        else:  # off until the next window starts
+            self.steady_until_s = w[self._i][0] if self._i < len(w) else math.inf
 
 
 class FaultInjector:
@@ -154,10 +165,17 @@ class FaultInjector:
         self.has_dropout = any(d.law == "dropout" for d in defs)
         self._row = [0.0] * (3 * len(self.faults))
         self.events: list[tuple[float, dict]] = []
-        self._sensor, self._command, self._plant = [], [], []
+        self._throttle = 0.0  # the (faulty) throttle command of the step, for after_commands
+        # the faults each per-step method acts on, in scenario order (bound once: no per-step dispatch by family)
+        self._sensor: list[_Bound] = []
+        self._throttle_faults: list[_Bound] = []  # actuator faults on the throttle (commands)
+        self._power_loss: list[_Bound] = []  # propeller thrust losses: the engine's lever (after_commands)
+        self._surface: list[_Bound] = []  # surface faults (plant)
+        self._flameout: list[_Bound] = []  # (plant)
+        self._thrust_loss: list[_Bound] = []  # jet thrust losses: the thrust multiplier (plant)
+        self._icing: list[_Bound] = []  # (plant)
         for f in self.faults:
             self._bind(f, aircraft)
-        self._icing = [f for f in self.faults if f.d.family == "airframe"]
 
     # ------------------------------------------------------------------ binding
     def _bind(self, f: _Bound, ac: Any) -> None:
@@ -170,8 +188,8 @@ class FaultInjector:
             for key, rate in (("bias", False), ("drift", True), ("value", False), ("noise_std", False), ("size", False)):
                 m = p.magnitude(key)
                 c[key] = to_native(m[0], m[1], native, rate) if m else None
-            c.update(scale=getattr(p, "scale", 1.0), rate_hz=getattr(p, "rate_hz", 0.0),
-                     delay_steps=int(round(getattr(p, "delay_s", 0.0) / self.dt_s)))
+            c.update(scale=getattr(p, "scale", 1.0), delay_steps=int(round(getattr(p, "delay_s", 0.0) / self.dt_s)),
+                     p_spike=getattr(p, "rate_hz", 0.0) * c["d"] * self.dt_s)  # outlier probability per sample instant
             self._sensor.append(f)
         elif d.family == "actuator":
             self._bind_actuator(f, ac, c)
@@ -180,22 +198,22 @@ class FaultInjector:
             c["loss"] = getattr(p, "loss", 1.0)
             if d.law == "flameout":
                 c["cut"] = lambda on, i=i: ac.set_engine_cutoff(i, on)
-                self._plant.append(f)
+                self._flameout.append(f)
             else:
                 scaler = ac.thrust_scaler(i)
                 if scaler is not None:  # exact thrust multiplier (jet)
                     c["scale"] = scaler
-                    self._plant.append(f)
+                    self._thrust_loss.append(f)
                 else:  # propeller: the engine's power lever is scaled
                     c["throttle"] = ac.node(f"fcs/throttle-cmd-norm[{i}]").set_double_value
-                    self._command.append(f)
+                    self._power_loss.append(f)
         elif d.family == "airframe":
             from fdi_sim.aircraft import icing
 
             ac.set_icing_k(icing.k_values(ac.name, p.region))
             c["set_eta"] = ac.icing_writer()
             c["eta_final"] = p.eta_final
-            self._plant.append(f)
+            self._icing.append(f)
         else:
             raise ValueError(f"unknown fault family {d.family!r}")
         f.c = c
@@ -206,7 +224,7 @@ class FaultInjector:
         c["flow_i"], c["float_sign"] = None, 0.0
         if d.target == "throttle":
             lo, hi, fastest = 0.0, 1.0, THROTTLE_RATE_NORMPS
-            self._command.append(f)
+            self._throttle_faults.append(f)
         else:
             h = ac.surface(d.target)
             spec = h.spec
@@ -216,7 +234,7 @@ class FaultInjector:
             if d.target in FLOAT_FLOW:  # the local flow angle a released surface trails with (laws.py)
                 signal, c["float_sign"] = FLOAT_FLOW[d.target]
                 c["flow_i"] = self._truth_idx[signal]
-            self._plant.append(f)
+            self._surface.append(f)
         c.update(lo=lo, hi=hi)
         for key in ("position", "bias", "amplitude"):
             m = p.magnitude(key)
@@ -241,7 +259,8 @@ class FaultInjector:
         for f in self.faults:
             f.reset_profile(self.duration_s, np.random.default_rng(rng.integers(2**63)))
             f.rng = np.random.default_rng(rng.integers(2**63))
-            f.c["buf"] = []
+            # a delay's healthy outputs of the last delay_steps + 1 steps (the oldest is the output now)
+            f.c["buf"] = deque(maxlen=f.c["delay_steps"] + 1) if f.law == "delay" else None
         self.valid[:] = 1.0
         self.events = [(0.0, {"event": "catalog", "faults": self.catalog()})]
 
@@ -265,6 +284,8 @@ class FaultInjector:
     def begin_step(self, t_s: float) -> None:
         """Every fault's level and onset/clear at ``t_s`` [s]; onsets and clears become events."""
         for f in self.faults:
+            if t_s < f.steady_until_s:  # level and activity as in the last step, no onset or clear
+                continue
             f.update(t_s)
             if f.onset or f.cleared:
                 self.events.append((t_s, {"event": "onset" if f.onset else "clear", "label": f.label,
@@ -279,11 +300,9 @@ class FaultInjector:
             c = f.c
             j = c["j"]
             yh = float(y[j])
-            if f.law == "delay":
-                buf = c["buf"]
+            buf = c["buf"]
+            if buf is not None:  # a delay: remember every healthy output
                 buf.append(yh)
-                if len(buf) > c["delay_steps"] + 1:
-                    del buf[0]
             if f.cleared and f.law == "dropout":
                 self.valid[j] = 1.0
             if not f.active:
@@ -319,8 +338,7 @@ class FaultInjector:
         if law == "delay":
             return c["buf"][0]
         if law == "outlier":
-            p_spike = c["rate_hz"] * c["d"] * self.dt_s  # per sample instant
-            if f.rng.random() < p_spike:
+            if f.rng.random() < c["p_spike"]:
                 return yh + w * c["size"] * (1.0 if f.rng.random() < 0.5 else -1.0)
             return yh
         raise ValueError(f"unknown sensor law {law!r}")
@@ -330,9 +348,7 @@ class FaultInjector:
 
         Call after the pilot and before the command writer; :meth:`after_commands` after it.
         """
-        for f in self._command:
-            if f.d.family != "actuator":
-                continue
+        for f in self._throttle_faults:
             c = f.c
             if not f.active:
                 f.error = 0.0
@@ -349,47 +365,43 @@ class FaultInjector:
 
     def after_commands(self) -> None:
         """Scale the power lever of engines with a power loss (after the command writer)."""
-        for f in self._command:
-            if f.d.family == "engine":
-                c, w = f.c, f.level
-                c["throttle"](self._throttle * (1.0 - w * c["loss"]))
-                f.error = w * c["loss"]
+        for f in self._power_loss:
+            c, w = f.c, f.level
+            c["throttle"](self._throttle * (1.0 - w * c["loss"]))
+            f.error = w * c["loss"]
 
     def plant(self, t_s: float, x: Any) -> None:
         """Surfaces, engines and icing for the coming JSBSim step (``x``: truth, array or list of floats)."""
-        for f in self._plant:
-            c, w = f.c, f.level
-            fam = f.d.family
-            onset, cleared = f.onset, f.cleared
-            if fam == "actuator":
-                h = c["handle"]
-                if not f.active:
-                    if h.held:
-                        h.release()
-                    f.error = 0.0
-                    continue
-                healthy, p = h.healthy(), h.position()
-                if onset:
-                    c["p0"] = p
-                flow = float(x[c["flow_i"]]) if c["flow_i"] is not None else 0.0
-                v = _blend_clip(actuator_value(f.law, c, t_s, f.t_on, healthy, p, c["p0"], self.dt_s, flow), healthy, w, c)
-                h.hold(v)
-                f.error = v - healthy
-            elif fam == "engine":
-                if f.law == "flameout":
-                    if onset:
-                        c["cut"](True)
-                    elif cleared:
-                        c["cut"](False)
-                    f.error = 1.0 if f.active else 0.0
-                else:
-                    c["scale"](1.0 - w * c["loss"])
-                    f.error = w * c["loss"]
-            else:  # icing
-                eta = w * c["eta_final"]
-                if eta != f.error or onset or cleared:
-                    c["set_eta"](eta)
-                f.error = eta
+        for f in self._surface:
+            c = f.c
+            h = c["handle"]
+            if not f.active:
+                if h.held:
+                    h.release()
+                f.error = 0.0
+                continue
+            healthy, p = h.healthy(), h.position()
+            if f.onset:
+                c["p0"] = p
+            flow = float(x[c["flow_i"]]) if c["flow_i"] is not None else 0.0
+            v = _blend_clip(actuator_value(f.law, c, t_s, f.t_on, healthy, p, c["p0"], self.dt_s, flow), healthy, f.level, c)
+            h.hold(v)
+            f.error = v - healthy
+        for f in self._flameout:
+            if f.onset:
+                f.c["cut"](True)
+            elif f.cleared:
+                f.c["cut"](False)
+            f.error = 1.0 if f.active else 0.0
+        for f in self._thrust_loss:
+            c = f.c
+            c["scale"](1.0 - f.level * c["loss"])
+            f.error = f.level * c["loss"]
+        for f in self._icing:
+            eta = f.level * f.c["eta_final"]
+            if eta != f.error or f.onset or f.cleared:
+                f.c["set_eta"](eta)
+            f.error = eta
 
     def initial_icing_eta(self) -> float:
         """Icing severity at t = 0 (for the trim), after :meth:`reset`."""

@@ -41,7 +41,7 @@ def toward(p: float, target: float, max_step: float) -> float:
 
 
 def actuator_value(law: str, c: dict, t_s: float, t_on_s: float, h: float, p: float, p0: float, dt_s: float,
-                   flow_angle: float) -> float:
+                   flow_angle_rad: float) -> float:
     """The faulty position before blending and clipping (see the module docstring).
 
     Parameters
@@ -54,13 +54,13 @@ def actuator_value(law: str, c: dict, t_s: float, t_on_s: float, h: float, p: fl
     h, p, p0 : float
         Healthy position now, position flown in the last step, position at onset [native].
     dt_s : float
-    flow_angle : float
+    flow_angle_rad : float
         Local flow angle for ``float`` [rad].
     """
     if law == "stuck":
-        return c["position"] if c.get("position") is not None else p0
+        return c["position"] if c["position"] is not None else p0
     if law == "float":
-        return p + dt_s / c["tau_s"] * (c["float_sign"] * c["float_ratio"] * flow_angle - p)
+        return p + dt_s / c["tau_s"] * (c["float_sign"] * c["float_ratio"] * flow_angle_rad - p)
     if law in ("hard-over", "runaway"):
         return toward(p, c["stop"], c["rate"] * dt_s)
     if law == "loss":

@@ -90,20 +90,13 @@ class Profile:
         """Level at ``t_s`` [s], 0..1 (slow path; the injector walks windows incrementally)."""
         for a, b in self.windows:
             if a <= t_s < b:
-                return min(1.0, (t_s - a) / self.ramp_s) if self.ramp_s > 0 else 1.0
+                return ramp_level(t_s - a, self.ramp_s)
         return 0.0
 
-    def levels(self, t_s: np.ndarray) -> np.ndarray:
-        """Level at many times [s] (vectorized, for tests and scoring)."""
-        out = np.zeros(np.shape(t_s))
-        for a, b in self.windows:
-            inside = (t_s >= a) & (t_s < b)
-            out[inside] = np.minimum(1.0, (t_s[inside] - a) / self.ramp_s) if self.ramp_s > 0 else 1.0
-        return out
 
-    @property
-    def t_first_s(self) -> float:
-        return self.windows[0][0] if self.windows else math.inf
+def ramp_level(t_on_s: float, ramp_s: float) -> float:
+    """Level ``t_on_s`` [s] after an onset: rises linearly from 0 to 1 over ``ramp_s`` [s], then 1."""
+    return min(1.0, t_on_s / ramp_s) if ramp_s > 0 else 1.0
 
 
 def make_profile(p: ProfileParams, duration_s: float, rng: np.random.Generator) -> Profile:

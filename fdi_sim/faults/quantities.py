@@ -7,17 +7,17 @@ a throttle ``position_norm = 0.2``. The magnitude is converted here to the targe
 """
 from __future__ import annotations
 
-import math
+from fdi_sim.units import FPS_PER_KT, FT_PER_M, G0_FPS2, RAD_PER_DEG
 
 # dimension -> {unit: factor to the dimension's base unit}
 _DIMENSIONS: dict[str, dict[str, float]] = {
-    "angle": {"rad": 1.0, "deg": math.pi / 180.0},
-    "angular_rate": {"radps": 1.0, "degps": math.pi / 180.0},
-    "angular_acceleration": {"radps2": 1.0, "degps2": math.pi / 180.0},
-    "length": {"ft": 1.0, "m": 1.0 / 0.3048},
-    "speed": {"fps": 1.0, "kts": 1.6878098571, "mps": 1.0 / 0.3048},
-    "acceleration": {"fps2": 1.0, "ktps": 1.6878098571, "mps2": 1.0 / 0.3048, "g": 32.174049},
-    "jerk": {"fps3": 1.0, "gps": 32.174049},
+    "angle": {"rad": 1.0, "deg": RAD_PER_DEG},
+    "angular_rate": {"radps": 1.0, "degps": RAD_PER_DEG},
+    "angular_acceleration": {"radps2": 1.0, "degps2": RAD_PER_DEG},
+    "length": {"ft": 1.0, "m": FT_PER_M},
+    "speed": {"fps": 1.0, "kts": FPS_PER_KT, "mps": FT_PER_M},
+    "acceleration": {"fps2": 1.0, "ktps": FPS_PER_KT, "mps2": FT_PER_M, "g": G0_FPS2},
+    "jerk": {"fps3": 1.0, "gps": G0_FPS2},
     "normalized": {"norm": 1.0},
     "normalized_rate": {"normps": 1.0},
     "mach": {"mach": 1.0},
