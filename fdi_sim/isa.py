@@ -1,8 +1,8 @@
 """The 1976 standard atmosphere and airspeed conversions, free of JSBSim.
 
-Used where no aircraft is loaded (grid envelopes, schedule lookup) and on the per-step path
-(the autopilot's TAS/CAS scale). Tested against the 1976 tables and against JSBSim's own air
-data in ``tests/linear/test_grid.py``.
+Used where no aircraft is loaded (grid envelopes, schedule lookup) and by the autopilot for its
+TAS/CAS scale about the trim point (computed once, when the pilot is built). Tested against the
+1976 tables and against JSBSim's own air data in ``tests/linear/test_grid.py``.
 """
 from __future__ import annotations
 
@@ -21,8 +21,8 @@ _GAMMA = 1.4              # ratio of specific heats of air [-]
 
 
 @dataclass(frozen=True)
-class Atmosphere:
-    """Standard-atmosphere state at one altitude.
+class StandardAtmosphere:
+    """Standard-atmosphere state at one altitude (not :class:`fdi_sim.aircraft.Atmosphere`, the wind).
 
     Attributes
     ----------
@@ -42,7 +42,7 @@ class Atmosphere:
     sound_speed_fps: float
 
 
-def isa(h_ft: float) -> Atmosphere:
+def isa(h_ft: float) -> StandardAtmosphere:
     """1976 standard atmosphere below 65 617 ft (geopotential altitude ~ geometric here)."""
     if not -2000.0 <= h_ft <= 65617.0:
         raise DesignError(f"h_ft = {h_ft:g} is outside the standard-atmosphere model (-2000 to 65617 ft)")
@@ -54,7 +54,7 @@ def isa(h_ft: float) -> Atmosphere:
         T = _T0_R - _LAPSE_R_PER_FT * _H_TROPO_FT
         p11 = _P0_PSF * (T / _T0_R) ** (G0_FPS2 / (_R_AIR_FTLBF_PER_SLUG_R * _LAPSE_R_PER_FT))
         p = p11 * math.exp(-G0_FPS2 * (h_ft - _H_TROPO_FT) / (_R_AIR_FTLBF_PER_SLUG_R * T))
-    return Atmosphere(T, p, p / (_R_AIR_FTLBF_PER_SLUG_R * T), math.sqrt(_GAMMA * _R_AIR_FTLBF_PER_SLUG_R * T))
+    return StandardAtmosphere(T, p, p / (_R_AIR_FTLBF_PER_SLUG_R * T), math.sqrt(_GAMMA * _R_AIR_FTLBF_PER_SLUG_R * T))
 
 
 def vc_from_vt(h_ft: float, vt_kts: float) -> tuple[float, float]:

@@ -20,3 +20,19 @@ def test_readme_python_example_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPa
         exec(compile(code, "README.md", "exec"), {})  # noqa: S102 - the documented example itself
     out = capsys.readouterr().out
     assert "completed" in out and os.path.exists(tmp_path / "runs")
+
+
+def test_readme_scenario_example_loads_and_its_plugin_lists_are_the_registry() -> None:
+    """The scenario file shown in the README validates as written (a fault starting at
+    duration_s was refused), and its comments name every maneuver and count every fault."""
+    from fdi_sim import registry
+    from fdi_sim.scenario import loads
+
+    text = (ROOT / "README.md").read_text()
+    (toml,) = re.findall(r"```toml\n(.*?)```", text, flags=re.S)
+    sc = loads(toml, "README.md")
+    assert [tid for tid, _ in sc.faults] == ["actuator-stuck-v1", "sensor-bias-v1"]
+    listed = re.search(r"\[\[maneuvers\]\]\s+# (.*)", toml).group(1).split(", ")
+    assert sorted(listed) == registry.ids("maneuver")
+    n_faults = int(re.search(r"# (\d+) registered faults", toml).group(1))
+    assert n_faults == len(registry.ids("fault"))

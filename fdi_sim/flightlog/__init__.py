@@ -57,10 +57,13 @@ from fdi_sim.flightlog.schemas import (
 from fdi_sim.flightlog.writer import EventChannel, FlightLogWriter, VectorChannel
 
 __all__ = [
-    "ALARM_JSON_SCHEMA", "FAILURE_LOG_JSON_SCHEMA", "FAULT_EVENT_JSON_SCHEMA", "TOPIC_FAULT_EVENTS", "TOPIC_SENSORS_VALID", "METADATA_FAULTS", "METADATA_SCENARIO", "STATUS_JSON_SCHEMA",
-    "TOPIC_COMMANDS", "TOPIC_FAULTS", "TOPIC_FDI_ALARMS", "TOPIC_FDI_FAILURE_LOG", "TOPIC_OPERATING_POINT", "TOPIC_SENSORS",
-    "TOPIC_SIM_STATUS", "TOPIC_SURFACES", "TOPIC_TRUTH_STATE",
+    "ALARM_JSON_SCHEMA", "FAILURE_LOG_JSON_SCHEMA", "FAULT_EVENT_JSON_SCHEMA", "METADATA_FAULTS",
+    "METADATA_SCENARIO", "STATUS_JSON_SCHEMA", "TOPIC_COMMANDS", "TOPIC_FAULTS",
+    "TOPIC_FAULT_EVENTS", "TOPIC_FDI_ALARMS", "TOPIC_FDI_FAILURE_LOG", "TOPIC_OPERATING_POINT",
+    "TOPIC_SENSORS", "TOPIC_SENSORS_VALID", "TOPIC_SIM_STATUS", "TOPIC_SURFACES",
+    "TOPIC_TRUTH_STATE",
     "Event", "EventChannel", "EventSchema", "EventTopic", "FlightLog", "FlightLogWriter", "LogInfo",
-    "RawTopic", "RepairReport", "TopicData", "TopicInfo", "VectorChannel", "VectorSchema", "VectorTopic",
+    "RawTopic", "RepairReport", "TopicData", "TopicInfo", "VectorChannel", "VectorSchema",
+    "VectorTopic",
     "event_schema", "fdi_topic", "log_info", "read_log", "repair_log", "vector_schema",
 ]

@@ -52,7 +52,7 @@ unit weight in ft, energy rates in ft/s; positive elevator is nose down on both 
 * yaw:       rudder = r_0 + k_r r_wo - k_beta beta, r_wo the yaw rate through a washout tau_wo.
 
 Gains per aircraft live in ``aircraft/<name>/autopilot.toml`` with the reasoning. The step is
-pure-Python scalar arithmetic (the measurement vector is converted to a list once per step).
+pure-Python scalar arithmetic (the loop passes a list of floats; an array is converted once per step).
 """
 from __future__ import annotations
 
@@ -65,7 +65,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.data import AIRCRAFT_DATA  # aircraft/ in a checkout, packaged in a wheel
+from fdi_sim.data import aircraft_file  # aircraft/ in a checkout, packaged in a wheel
 from fdi_sim.isa import vt_from_vc
 from fdi_sim.pilot.maneuvers import AXES, HeadingChange, PulseTrain, RefRamp, Turn
 from fdi_sim.units import FPS_PER_KT, G0_FPS2, RAD_PER_DEG
@@ -163,8 +163,7 @@ class AutopilotGains:
     @classmethod
     def for_aircraft(cls, name: str) -> "AutopilotGains":
         """Load ``aircraft/<name>/autopilot.toml`` (angles there are in deg, converted here)."""
-        base = "DHC6" if name.startswith("DHC6") else name
-        data = tomllib.loads((AIRCRAFT_DATA / base / "autopilot.toml").read_text())["gains"]
+        data = tomllib.loads(aircraft_file(name, "autopilot.toml").read_text())["gains"]
         kw = {}
         for f in fields(cls):
             if f.name.endswith("_rad") and f.name.replace("_rad", "_deg") in data:
@@ -217,10 +216,6 @@ class TrimPoint:
 
 _TWO_PI = 2.0 * math.pi
 _TUPLE_NEW = tuple.__new__
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class Pilot:
@@ -298,7 +293,7 @@ class Pilot:
         self._first = True  # the angle-of-attack filter and the wind estimate start from the first measurement
         self._psi_hold = self.trim.psi_rad
         self._in_turn = False
-        self._phi_cmd = 0.0  # low-passed bank command [rad]
+        self._phi_cmd_rad = 0.0  # low-passed bank command [rad]
         self.headings = list(self._headings)  # heading changes still ahead (a turn exit drops past ones)
         self._block_start = -(10**9)
         self._rows: list[list[float]] = []
@@ -337,13 +332,6 @@ class Pilot:
         tab[:, 7] = turn_phi
         self._rows, self._block_start = tab.tolist(), k0  # Python floats: scalar maths per step stays cheap
 
-    def _psi_ref(self, t_s: float) -> float:
-        psi = self._psi_hold
-        for hc in self.headings:
-            if t_s >= hc.t_start_s:
-                psi = hc.psi_deg * RAD_PER_DEG
-        return psi
-
     def step(self, t_s: float, y: NDArray[np.float64] | list[float]) -> PilotCommand:
         """Commands for time ``t_s`` [s] from the measurement vector ``y`` (array or list of floats).
 
@@ -376,21 +364,21 @@ class Pilot:
             k_psi, phi_max, tau_phi, k_phi, k_p, k_phii, k_absbeta, k_r, k_beta, tau_wo = self._g_lat
             if turn_phi == turn_phi:  # not NaN: in a turn
                 self._in_turn = True
-                phi_cmd = phi_ref = self._phi_cmd = turn_phi
+                phi_cmd = phi_ref = self._phi_cmd_rad = turn_phi
             else:
                 if self._in_turn:  # leaving a turn: hold the heading reached
                     self._in_turn = False
                     self._psi_hold = psi_m
                     self.headings = [h for h in self.headings if h.t_start_s > t_s]
                     psi_ref = self._psi_hold
-                e_psi = (psi_ref - psi_m + math.pi) % _TWO_PI - math.pi  # _wrap(psi_ref - psi_m)
+                e_psi = (psi_ref - psi_m + math.pi) % _TWO_PI - math.pi  # wrap(psi_ref - psi_m) into [-pi, pi)
                 # phi_raw = sat(k_psi e_psi, phi_max)
                 phi_raw = k_psi * e_psi
                 phi_raw = phi_raw if phi_raw < phi_max else phi_max
                 phi_raw = phi_raw if phi_raw > -phi_max else -phi_max
-                phi_cmd = self._phi_cmd
+                phi_cmd = self._phi_cmd_rad
                 phi_cmd += dt * (phi_raw - phi_cmd) / tau_phi
-                self._phi_cmd = phi_ref = phi_cmd
+                self._phi_cmd_rad = phi_ref = phi_cmd
             e_phi = phi_cmd - phi
             int_phi = self._int_phi
             ail += k_phi * e_phi - k_p * p + k_phii * (int_phi + e_phi * dt)

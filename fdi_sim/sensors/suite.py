@@ -20,7 +20,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.data import AIRCRAFT_DATA  # aircraft/ in a checkout, packaged in a wheel
+from fdi_sim.data import aircraft_file  # aircraft/ in a checkout, packaged in a wheel
 
 BLOCK_STEPS = 120
 
@@ -58,8 +58,7 @@ class SensorSpec:
 
 def suite_path(aircraft: str, suite: str = "default") -> Path:
     """``aircraft/<aircraft>/sensors.toml`` for ``suite = "default"``, else ``sensors_<suite>.toml``."""
-    base = "DHC6" if aircraft.startswith("DHC6") else aircraft
-    return AIRCRAFT_DATA / base / ("sensors.toml" if suite == "default" else f"sensors_{suite}.toml")
+    return aircraft_file(aircraft, "sensors.toml" if suite == "default" else f"sensors_{suite}.toml")
 
 
 def suite_names(aircraft: str) -> list[str]:
@@ -124,7 +123,6 @@ class SensorSuite:
         if unknown:
             raise ValueError(f"sensors measure unknown signals {unknown}")
         self.dt_s = dt_s
-        self._idx = np.array([list(truth_names).index(n) for n in self.names], dtype=np.intp)
         sim_hz = 1.0 / dt_s
         decim = []
         for s in specs:

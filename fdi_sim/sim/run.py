@@ -8,28 +8,28 @@ log is closed in ``finally`` in every case, so it is always readable.
 """
 from __future__ import annotations
 
-import dataclasses
 import importlib.metadata
 import json
 import math
 import platform
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from fdi_sim import registry
 from fdi_sim.aircraft import (
-    COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, hold_trim_in_wind, trim,
+    COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, TrimResult, hold_trim_in_wind, trim,
 )
+from fdi_sim.aircraft.model import wind_ned_fps
 from fdi_sim.errors import LogError, SimulationDiverged
 from fdi_sim.faults.injector import FaultInjector
 from fdi_sim.flightlog import (
     FAULT_EVENT_JSON_SCHEMA,
     METADATA_FAULTS,
+    METADATA_SCENARIO,
     STATUS_JSON_SCHEMA,
     TOPIC_COMMANDS,
     TOPIC_FAULT_EVENTS,
@@ -45,7 +45,7 @@ from fdi_sim.flightlog import (
 from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimPoint
 from fdi_sim.scenario import Scenario
 from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
-from fdi_sim.units import DEG_PER_RAD, FPS_PER_KT, RAD_PER_DEG
+from fdi_sim.units import DEG_PER_RAD, RAD_PER_DEG
 
 OP_SIGNALS = ("h_ft", "vc_kts", "mach", "alpha_rad", "flaps_deg", "icing_eta")
 # the pitch trim is set by the trim and held; logged so that detectors using the commands see the
@@ -128,7 +128,7 @@ def _default_log_path(sc: Scenario, out_dir: Path) -> Path:
     return out_dir / f"{sc.name}_seed{sc.seed}.mcap"
 
 
-def build_pilot(sc: Scenario, tr: Any, measurement_names: tuple[str, ...]) -> Pilot:
+def build_pilot(sc: Scenario, tr: TrimResult, measurement_names: tuple[str, ...]) -> Pilot:
     maneuvers = [registry.get("maneuver", tid).factory(p) for tid, p in sc.maneuvers]
     tp = TrimPoint(
         tr.elevator_cmd_norm, tr.aileron_cmd_norm, tr.rudder_cmd_norm, tr.throttle_cmd_norm, tr.theta_rad,
@@ -172,8 +172,8 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     ss_sensors, ss_pilot, ss_jsbsim, ss_faults, _ss_fdi = seeds.spawn(5)
     jsbsim_seed = int(ss_jsbsim.generate_state(1)[0] % (2**31 - 1))
     metadata = {
-        "scenario": {"name": sc.name, "seed": str(sc.seed), "source": sc.source, "text": sc.text, "json": sc.to_json(),
-                     "aircraft": sc.aircraft, "rate_hz": str(sc.model.rate_hz)},
+        METADATA_SCENARIO: {"name": sc.name, "seed": str(sc.seed), "source": sc.source, "text": sc.text,
+                            "json": sc.to_json(), "aircraft": sc.aircraft, "rate_hz": str(sc.model.rate_hz)},
         "versions": _versions(),
     }
     # open the log first: an unwritable folder fails before any simulation
@@ -202,7 +202,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             eta0 = injector.initial_icing_eta()
             if eta0:  # iced from the start: trim with the ice on
                 ac.icing_writer()(eta0)
-                op = dataclasses.replace(op, icing_eta=eta0)
+                op = replace(op, icing_eta=eta0)
             writer.add_metadata(METADATA_FAULTS, {"catalog": json.dumps(injector.catalog())})
         tr = trim(ac, op)
         a = sc.model.atmosphere
@@ -260,8 +260,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     a_lo, a_hi = lim.alpha_min_deg * RAD_PER_DEG, lim.alpha_max_deg * RAD_PER_DEG
     phi_max, rate_max, vc_min = lim.phi_max_deg * RAD_PER_DEG, lim.rate_max_radps, lim.vc_min_kts
     atm = sc.model.atmosphere
-    to = math.radians(atm.wind_from_deg + 180.0)
-    wn, we = atm.wind_speed_kts * FPS_PER_KT * math.cos(to), atm.wind_speed_kts * FPS_PER_KT * math.sin(to)
+    wn, we, _ = wind_ned_fps(atm.wind_from_deg, atm.wind_speed_kts)  # steady air mass [ft/s]
     flaps_deg = sc.model.initial.flaps_deg
     dt = sc.dt_s
     n_steps = int(round(sc.duration_s / dt))

@@ -25,8 +25,7 @@ from mcap.data_stream import RecordBuilder, ReadDataStream
 
 from fdi_sim.errors import LogError
 from fdi_sim.flightlog import FlightLogWriter, vector_schema
-from fdi_sim.flightlog.records import scan_records
-from fdi_sim.flightlog.records import RawMessage, VectorBlock, build_chunk, encode_message_index
+from fdi_sim.flightlog.records import RawMessage, VectorBlock, build_chunk, encode_message_index, scan_records
 
 TRUTH = ("t_s", "alpha_rad", "q_radps", "vt_fps")
 SENS = ("t_s", "q_meas_radps")
