@@ -82,6 +82,12 @@ _GET: dict[str, str] = {
     "Alt": "position/h-sl-ft", "DaCmd": "fcs/aileron-cmd-norm", "DeCmd": "fcs/elevator-cmd-norm",
     "DrCmd": "fcs/rudder-cmd-norm", "ThtlCmd": "fcs/throttle-cmd-norm[0]",
 }
+#: components whose ``set`` writes one property (the others: :meth:`_StateSpace.set`)
+_SET: dict[str, str] = {
+    "Q": "ic/q-rad_sec", "Phi": "ic/phi-rad", "P": "ic/p-rad_sec", "Psi": "ic/psi-true-rad", "R": "ic/r-rad_sec",
+    "Latitude": "ic/lat-gc-rad", "Longitude": "ic/long-gc-rad", "Alt": "ic/h-sl-ft", "DaCmd": "fcs/aileron-cmd-norm",
+    "DeCmd": "fcs/elevator-cmd-norm", "DrCmd": "fcs/rudder-cmd-norm",
+}
 #: derivatives read directly from one property
 _DERIV: dict[str, str] = {
     "Alpha": "aero/alphadot-rad_sec", "Theta": "velocities/thetadot-rad_sec", "Q": "accelerations/qdot-rad_sec2",
@@ -162,10 +168,7 @@ class _StateSpace:
             for i in range(self.n_eng):
                 fdm[f"fcs/throttle-cmd-norm[{i}]"] = val
         else:
-            fdm[{"Q": "ic/q-rad_sec", "Phi": "ic/phi-rad", "P": "ic/p-rad_sec", "Psi": "ic/psi-true-rad",
-                 "R": "ic/r-rad_sec", "Latitude": "ic/lat-gc-rad", "Longitude": "ic/long-gc-rad",
-                 "Alt": "ic/h-sl-ft", "DaCmd": "fcs/aileron-cmd-norm", "DeCmd": "fcs/elevator-cmd-norm",
-                 "DrCmd": "fcs/rudder-cmd-norm"}[name]] = val
+            fdm[_SET[name]] = val
 
     def deriv(self, name: str) -> float:
         """FGStateSpace's ``getDeriv`` of one state."""

@@ -301,16 +301,18 @@ class Aircraft:
 
         return set_fraction
 
-    def icing_writer(self) -> Callable[[float], None]:
-        """A closure ``set(eta)`` of the icing severity (icing overlay only)."""
+    def _require_icing(self) -> None:
         if not self.icing:
             raise FdiSimError(f"{self.name} was loaded without the icing overlay: use Aircraft({self.name!r}, icing=True)")
+
+    def icing_writer(self) -> Callable[[float], None]:
+        """A closure ``set(eta)`` of the icing severity (icing overlay only)."""
+        self._require_icing()
         return self.node("icing/eta").set_double_value
 
     def set_icing_k(self, k: dict[str, float]) -> None:
-        """Set the icing factors ``icing/k-<coefficient>`` (e.g. ``{"CmDe": -1.48}``)."""
-        if not self.icing:
-            raise FdiSimError(f"{self.name} was loaded without the icing overlay")
+        """Set the icing factors ``icing/k-<coefficient>`` (e.g. ``{"CmDe": -1.48}``; icing overlay only)."""
+        self._require_icing()
         for name, value in k.items():
             self.node(f"icing/k-{name}").set_double_value(float(value))
 

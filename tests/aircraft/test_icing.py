@@ -15,7 +15,7 @@ from fdi_sim.aircraft.icing import (
     ICED_MODELS, IcingDataError, _parse_table, data_path, eta_max, icing_data, k_values, regions,
 )
 from fdi_sim.aircraft.overlays import jsbsim_root
-from fdi_sim.errors import TrimError
+from fdi_sim.errors import FdiSimError, TrimError
 from fdi_sim.operating_point import OperatingPoint
 
 DHC6_100 = OperatingPoint("DHC6", 5000.0, vc_kts=100.0)
@@ -264,8 +264,13 @@ def test_elevator_doublet_pitch_response_drops_10_to_20_percent() -> None:
 
 
 def test_iced_trim_needs_the_overlay() -> None:
+    clean = Aircraft("DHC6")
     with pytest.raises(TrimError, match="icing=True"):
-        trim(Aircraft("DHC6"), _at(DHC6_100, ETA))
+        trim(clean, _at(DHC6_100, ETA))
+    with pytest.raises(FdiSimError, match="icing=True"):  # the clean model has no icing/eta to write
+        clean.icing_writer()
+    with pytest.raises(FdiSimError, match="icing=True"):
+        clean.set_icing_k(k_values("DHC6", "tail"))
 
 
 def test_f16_generic_ice_costs_thrust() -> None:
