@@ -18,7 +18,7 @@ from fdi_sim.scenario import from_dict  # noqa: E402
 from fdi_sim.sim import run  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "figures"
-T_ON = 2.0
+T_ON_S = 2.0
 
 
 def fly(tmp: Path, aircraft: str, faults: list[dict], name: str, initial: dict, duration_s: float = 10.0,
@@ -35,12 +35,12 @@ def fly(tmp: Path, aircraft: str, faults: list[dict], name: str, initial: dict, 
 def actuator_figure(tmp: Path) -> None:
     laws = {
         "healthy": [],
-        "stuck": [{"type": "actuator-stuck-v1", "target": "elevator", "t_start_s": T_ON}],
-        "loss 50 %": [{"type": "actuator-loss-v1", "target": "elevator", "effectiveness": 0.5, "t_start_s": T_ON}],
-        "float": [{"type": "actuator-float-v1", "target": "elevator", "t_start_s": T_ON}],
-        "rate limit 5 deg/s": [{"type": "actuator-rate-limit-v1", "target": "elevator", "rate_degps": 5.0, "t_start_s": T_ON}],
+        "stuck": [{"type": "actuator-stuck-v1", "target": "elevator", "t_start_s": T_ON_S}],
+        "loss 50 %": [{"type": "actuator-loss-v1", "target": "elevator", "effectiveness": 0.5, "t_start_s": T_ON_S}],
+        "float": [{"type": "actuator-float-v1", "target": "elevator", "t_start_s": T_ON_S}],
+        "rate limit 5 deg/s": [{"type": "actuator-rate-limit-v1", "target": "elevator", "rate_degps": 5.0, "t_start_s": T_ON_S}],
         "oscillation 1 deg 2 Hz": [{"type": "actuator-oscillation-v1", "target": "elevator", "amplitude_deg": 1.0,
-                                    "frequency_hz": 2.0, "t_start_s": T_ON}],
+                                    "frequency_hz": 2.0, "t_start_s": T_ON_S}],
     }
     fig, ax = plt.subplots(2, 1, sharex=True, figsize=(8, 6))
     for label, faults in laws.items():
@@ -49,7 +49,7 @@ def actuator_figure(tmp: Path) -> None:
         ax[0].plot(s["t_s"], np.degrees(s["elevator_pos_rad"]), label=label)
         ax[1].plot(x["t_s"], np.degrees(x["q_radps"]), label=label)
     for a in ax:
-        a.axvspan(T_ON, 10.0, color="0.9", zorder=0)
+        a.axvspan(T_ON_S, 10.0, color="0.9", zorder=0)
         a.grid(alpha=0.3)
     ax[0].set_ylabel("elevator flown [deg]")
     ax[1].set_ylabel("pitch rate q [deg/s]")

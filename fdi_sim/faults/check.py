@@ -9,8 +9,9 @@ suite or the other faults is checked here, with errors that name the file, the k
   (their spans ``[t_start_s, t_end_s)``, the whole run when ``t_end_s`` is omitted). Composing
   two corruptions of one signal has no single order a user could rely on, and the logged error
   of each would be ambiguous; put compound failures on different targets, or one after the other;
-* icing: at most one icing fault, ``eta_final`` within the range the coefficients were fitted for
-  (refused above it: :func:`fdi_sim.aircraft.icing.eta_max`);
+* icing (target ``airframe``, so one icing fault at a time by the rule above): ``eta_final``
+  within the range the coefficients were fitted for (refused above it:
+  :func:`fdi_sim.aircraft.icing.eta_max`);
 * the fault starts before the run ends.
 """
 from __future__ import annotations
@@ -20,9 +21,6 @@ from typing import Any
 
 from fdi_sim.errors import ScenarioError
 from fdi_sim.faults.quantities import allowed_units, target_unit, to_native
-
-#: fault family -> the prefix of its type ids
-FAMILY_PREFIX = {"actuator": "actuator-", "engine": "engine-", "sensor": "sensor-", "airframe": "icing-"}
 
 
 def targets(aircraft: str, sensor_names: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
@@ -55,7 +53,7 @@ def check_faults(sc: Any) -> None:
         if d.law == "float":
             allowed = tuple(a for a in allowed if a != "throttle")
         if p.target not in allowed:
-            where = {"sensor": "its sensor suite has", "engine": "it has"}.get(d.family, "it has")
+            where = "its sensor suite has" if d.family == "sensor" else "it has"
             raise ScenarioError(sc.source, f"{key}.target", f"{m.aircraft} has no {d.family} target {p.target!r} for {tid}",
                                 f"{where}: {', '.join(allowed)}")
         native = target_unit(d.family, p.target)

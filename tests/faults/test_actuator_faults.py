@@ -19,7 +19,7 @@ import pytest
 
 from conftest import doublet, fly
 
-T_ON, T_DOUBLET = 2.0, 3.0
+T_ON_S, T_DOUBLET_S = 2.0, 3.0
 RATE = {"elevator": "q_radps", "rudder": "r_radps"}
 LAWS = {
     "stuck": {"type": "actuator-stuck-v1"},
@@ -31,14 +31,14 @@ LAWS = {
     "oscillation": {"type": "actuator-oscillation-v1", "amplitude_deg": 1.0, "frequency_hz": 2.0},
     "float": {"type": "actuator-float-v1"},
 }
-DT = 1.0 / 120.0
+DT_S = 1.0 / 120.0
 
 
 @lru_cache(maxsize=None)
 def _runs(aircraft: str, surface: str, law: str | None, tmp: str) -> tuple[dict, dict]:
-    faults = [] if law is None else [dict(LAWS[law], target=surface, t_start_s=T_ON)]
+    faults = [] if law is None else [dict(LAWS[law], target=surface, t_start_s=T_ON_S)]
     kw = {"faults": faults, "may_diverge": True}
-    with_d = fly(Path(tmp), aircraft, maneuvers=[doublet(surface, T_DOUBLET)], **kw)
+    with_d = fly(Path(tmp), aircraft, maneuvers=[doublet(surface, T_DOUBLET_S)], **kw)
     without = fly(Path(tmp), aircraft, **kw)
     return with_d, without
 
@@ -54,8 +54,8 @@ def _response(pair: tuple[dict, dict], rate: str) -> np.ndarray:
     return a[:n] - b[:n]
 
 
-def _peak(resp: np.ndarray, t0: float = T_DOUBLET, t1: float = T_DOUBLET + 3.0) -> float:
-    t = np.arange(len(resp)) * DT
+def _peak(resp: np.ndarray, t0: float = T_DOUBLET_S, t1: float = T_DOUBLET_S + 3.0) -> float:
+    t = np.arange(len(resp)) * DT_S
     w = (t >= t0) & (t < t1)
     assert w.any(), "the run ended before the doublet"
     return float(np.abs(resp[w]).max())
@@ -70,7 +70,7 @@ def _surface(run: dict, surface: str) -> tuple[np.ndarray, np.ndarray, np.ndarra
     pos = s[f"{surface}_pos_rad"][:n]
     err_col = next(c for c in f.fields if c.endswith("_error"))
     healthy = pos - f[err_col][:n]
-    on = t >= T_ON
+    on = t >= T_ON_S
     return t[on], pos[on], healthy[on]
 
 
@@ -88,7 +88,7 @@ def test_actuator_fault_effect(aircraft: str, surface: str, law: str, tmpdir_str
     pair = _runs(aircraft, surface, law, tmpdir_str)
     faulty, quiet = pair
     t, pos, healthy = _surface(faulty, surface)
-    slew_radps = np.abs(np.diff(pos)) / DT
+    slew_radps = np.abs(np.diff(pos)) / DT_S
 
     if law == "stuck":
         # jammed at the onset position: the surface never moves, the doublet does nothing
@@ -108,11 +108,11 @@ def test_actuator_fault_effect(aircraft: str, surface: str, law: str, tmpdir_str
         assert slew_radps.max() <= rate_max * (1 + 1e-9)
         at_stop = np.flatnonzero(np.isclose(pos, stop, atol=1e-12))
         assert at_stop.size, "the surface must reach its stop"
-        t_reach = t[at_stop[0]] - T_ON
-        assert t_reach <= abs(stop - pos[0]) / rate_max + 2 * DT, t_reach  # within the stated rate
+        t_reach = t[at_stop[0]] - T_ON_S
+        assert t_reach <= abs(stop - pos[0]) / rate_max + 2 * DT_S, t_reach  # within the stated rate
         assert np.all(np.isclose(pos[at_stop[0]:], stop, atol=1e-12))  # and stays there
         x = faulty["/truth/state"]
-        assert np.abs(x[rate][x["t_s"] > T_ON]).max() > 0.05  # a hard-over upsets the aircraft
+        assert np.abs(x[rate][x["t_s"] > T_ON_S]).max() > 0.05  # a hard-over upsets the aircraft
     elif law == "runaway":
         expected = np.minimum(pos[0] + math.radians(2.0) * (t - t[0]), math.radians(spec.max_deg))
         np.testing.assert_allclose(pos, expected, atol=1e-9)
@@ -125,22 +125,22 @@ def test_actuator_fault_effect(aircraft: str, surface: str, law: str, tmpdir_str
         assert slew_radps.max() <= math.radians(5.0) * (1 + 1e-9)
         assert np.abs(pos - healthy).max() > math.radians(0.5)  # it lags the healthy actuator
     elif law == "oscillation":
-        np.testing.assert_allclose(pos - healthy, math.radians(1.0) * np.sin(2 * np.pi * 2.0 * (t - T_ON)), atol=1e-9)
+        np.testing.assert_allclose(pos - healthy, math.radians(1.0) * np.sin(2 * np.pi * 2.0 * (t - T_ON_S)), atol=1e-9)
         # the body rate (fault run without doublet) oscillates at 2 Hz: spectral peak there
         x = quiet["/truth/state"]
-        sel = x["t_s"] >= T_ON + 1.0
+        sel = x["t_s"] >= T_ON_S + 1.0
         sig = x[rate][sel] - np.polyval(np.polyfit(x["t_s"][sel], x[rate][sel], 2), x["t_s"][sel])
         spec_ = np.abs(np.fft.rfft(sig * np.hanning(sig.size)))
-        f = np.fft.rfftfreq(sig.size, DT)
+        f = np.fft.rfftfreq(sig.size, DT_S)
         assert abs(f[1 + np.argmax(spec_[1:])] - 2.0) < 0.3
     elif law == "float":
         assert _peak(_response(pair, rate)) == 0.0  # released: the command no longer reaches it
         x = quiet["/truth/state"]
-        n = min(len(x["t_s"]), len(pos) + int(T_ON / DT))
+        n = min(len(x["t_s"]), len(pos) + int(T_ON_S / DT_S))
         flow = x["alpha_rad"] if surface == "elevator" else x["beta_rad"]
         sign = -1.0 if surface == "elevator" else 1.0
         _, qpos, _ = _surface(quiet, surface)
         # first-order lag toward delta_float = sign * 0.6 * local flow angle (tau 0.3 s)
-        target = sign * 0.6 * flow[int(round(T_ON / DT)):n][: len(qpos)]
+        target = sign * 0.6 * flow[int(round(T_ON_S / DT_S)):n][: len(qpos)]
         k = np.arange(len(qpos) - 1)
-        np.testing.assert_allclose(qpos[1:], qpos[:-1] + DT / 0.3 * (target[k + 1] - qpos[:-1]), atol=1e-9)
+        np.testing.assert_allclose(qpos[1:], qpos[:-1] + DT_S / 0.3 * (target[k + 1] - qpos[:-1]), atol=1e-9)

@@ -13,7 +13,7 @@ from fdi_sim.errors import ScenarioError
 from fdi_sim.faults.profile import ProfileParams, make_profile
 from fdi_sim.scenario import from_dict
 
-DT = 1.0 / 120.0
+DT_S = 1.0 / 120.0
 
 
 def test_truth_matches_the_scenario_to_the_step(tmp_path: Path) -> None:
@@ -27,7 +27,7 @@ def test_truth_matches_the_scenario_to_the_step(tmp_path: Path) -> None:
     f = run["/faults/active"]
     t = f["t_s"]
     k = np.arange(len(t))
-    np.testing.assert_array_equal(t, k * DT)
+    np.testing.assert_array_equal(t, k * DT_S)
     # onset and clear at the first step at or after the scenario times, exactly
     np.testing.assert_array_equal(f["q_radps_bias_active"], ((k >= 120) & (k < 300)).astype(float))
     np.testing.assert_array_equal(f["elevator_bias_active"], (k >= 180).astype(float))
@@ -83,13 +83,18 @@ def test_adding_a_fault_changes_neither_noise_nor_turbulence(tmp_path: Path) -> 
     np.testing.assert_array_equal(a["/truth/state"].data[:300], b["/truth/state"].data[:300])
 
 
+def _thrust(run: dict, t_on_s: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """(t_s [s], total thrust [lbf], its mean before the onset ``t_on_s`` [lbf]) of a run."""
+    s = run["/truth/surfaces"]
+    t, thrust = s["t_s"], s["thrust_lbf"]
+    return t, thrust, float(thrust[t < t_on_s].mean())
+
+
 @pytest.mark.parametrize("aircraft", ["f16", "DHC6"])
 def test_engine_flameout_and_relight(aircraft: str, tmp_path: Path) -> None:
     faults = [{"type": "engine-flameout-v1", "target": "engine_0", "t_start_s": 1.0, "t_end_s": 6.0}]
     run = fly(tmp_path, aircraft, faults=faults, duration_s=40.0)
-    s = run["/truth/surfaces"]
-    t, thrust = s["t_s"], s["thrust_lbf"]
-    t0 = thrust[t < 1.0].mean()
+    t, thrust, t0 = _thrust(run, 1.0)
     assert thrust[(t > 4.0) & (t < 6.0)].mean() < (0.05 if aircraft == "f16" else 0.55) * t0  # one of two engines
     assert thrust[t > 35.0].mean() > 0.8 * t0  # relit (airstart takes seconds)
     if aircraft == "DHC6":  # asymmetric thrust yaws the aircraft toward the dead (left) engine
@@ -101,9 +106,7 @@ def test_engine_flameout_and_relight(aircraft: str, tmp_path: Path) -> None:
 def test_thrust_loss(aircraft: str, tmp_path: Path) -> None:
     faults = [{"type": "engine-thrust-loss-v1", "target": "engine_0", "loss": 0.5, "t_start_s": 1.0}]
     run = fly(tmp_path, aircraft, faults=faults, duration_s=8.0)
-    s = run["/truth/surfaces"]
-    t, thrust = s["t_s"], s["thrust_lbf"]
-    t0 = thrust[t < 1.0].mean()
+    t, thrust, t0 = _thrust(run, 1.0)
     late = thrust[(t > 6.0)].mean() / t0
     if aircraft == "f16":  # exact: thrust x cos(reverser angle) = 0.5 x thrust
         assert late == pytest.approx(0.5, abs=0.03)
