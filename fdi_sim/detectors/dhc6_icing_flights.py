@@ -276,10 +276,10 @@ def flight_samples(log: FlightLog, dt_s: float, eta: float, seed: int) -> Flight
         elevator fault is on at t = 0.
     """
     meas, cmd, surf, truth = (log.topics[t] for t in (TOPIC_SENSORS, TOPIC_COMMANDS, TOPIC_SURFACES, TOPIC_TRUTH_STATE))
-    dt_sim = float(cmd.t_s[1] - cmd.t_s[0])
-    n_sub = int(round(dt_s / dt_sim))
-    if n_sub < 1 or abs(n_sub * dt_sim - dt_s) > 1e-9:
-        raise DesignError(f"dt_s = {dt_s} is not a multiple of the simulation step {dt_sim}")
+    dt_sim_s = float(cmd.t_s[1] - cmd.t_s[0])
+    n_sub = int(round(dt_s / dt_sim_s))
+    if n_sub < 1 or abs(n_sub * dt_sim_s - dt_s) > 1e-9:
+        raise DesignError(f"dt_s = {dt_s} is not a multiple of the simulation step {dt_sim_s}")
     n_steps = len(surf)  # surfaces are logged after each step: one fewer than the commands
     n = n_steps // n_sub
     idx = np.arange(n) * n_sub
