@@ -21,6 +21,7 @@ from fdi_sim.linear.transform import discretize  # noqa: E402
 from fdi_sim.linear.validate import DoubletSpec, compare, fly_doublets  # noqa: E402
 from fdi_sim.operating_point import OperatingPoint  # noqa: E402
 from fdi_sim.review.linear_figures import pole_map  # noqa: E402
+from fdi_sim.units import DEG_PER_RAD  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "figures"
 
@@ -61,7 +62,7 @@ def validation_examples() -> None:
         fits[f"{meth} ({v.nrmse_pair[0, i]:.1%})"] = v.y_lin[0, :, i]
         print(f"F-16 5000 ft / 420 KTAS rudder doublet, r_radps error: {meth} {v.nrmse_pair[0, i]:.2%}")
     t = np.arange(runs.dy.shape[1]) * ac.dt_s
-    _one(axes[0], t, runs.dy[0, :, i], fits, 57.29578, "r [deg/s]",
+    _one(axes[0], t, runs.dy[0, :, i], fits, DEG_PER_RAD, "r [deg/s]",
          "F-16 5000 ft / 420 KTAS, rudder doublet 0.01")
     # (b) DHC-6 132 KCAS: the aileron doublet across the left aileron's kink, per unit amplitude
     ac = Aircraft("DHC6")

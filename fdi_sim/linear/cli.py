@@ -55,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         from fdi_sim.linear.grid import resolve_grid
         from fdi_sim.linear.linearize import linearize_grid
         from fdi_sim.linear.report import BAR, bar_entry, bar_method, format_report, method_label, worst_validation
+        from fdi_sim.linear.validate import NRMSE_BAR
 
         grid = resolve_grid(args.grid, name)
         if args.duration is not None:
@@ -97,6 +98,6 @@ def run(args: argparse.Namespace) -> int:
     w = worst_validation(schedule, BAR)
     if w:
         n_pass = sum(bool((bar_entry(p, bar_method(schedule)) or {}).get("passed")) for p in schedule.ok_points)
-        print(f"bar ({method_label(BAR, schedule)}): {n_pass}/{ok} points below 5 %; worst {w[1]} {w[2]:.1%} at {w[0]}")
+        print(f"bar ({method_label(BAR, schedule)}): {n_pass}/{ok} points below {NRMSE_BAR * 100:g} %; worst {w[1]} {w[2]:.1%} at {w[0]}")
     print(f"schedule   {path}\nreport     {report}" + (f"\npole map   {fig}" if fig else ""))
     return 0

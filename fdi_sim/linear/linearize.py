@@ -48,8 +48,8 @@ from fdi_sim.linear.modes import identify_modes
 from fdi_sim.linear.schedule import ARRAYS, ModelSchedule, SchedulePoint
 from fdi_sim.linear.transform import discretize
 from fdi_sim.linear.validate import (
-    ENGINE_LAG_KEY, NONSMOOTH_JUMP, DoubletRuns, ValidationResult, ValidationSettings, lag_row, compare,
-    default_doublets, fly_doublets,
+    ENGINE_LAG_KEY, NONSMOOTH_JUMP, DoubletRuns, ValidationResult, ValidationSettings, compare, default_doublets,
+    expseek, fly_doublets, lag_row,
 )
 from fdi_sim.operating_point import OperatingPoint
 from fdi_sim.units import KT_PER_FPS
@@ -514,22 +514,17 @@ def n1_excursions(runs: DoubletRuns, model: LinearModel | None) -> NDArray[np.fl
     """Largest gas-generator excursion of each run [%], from the identified lag (zeros without one).
 
     N1 follows ``K u`` (``K`` the model's static gain of its N1 row, :func:`lag_row`) by
-    FGTurboProp's ExpSeek with the lag of ``runs.engine_lag``; only the throttle run moves it.
+    FGTurboProp's ExpSeek with the lag of ``runs.engine_lag`` (:func:`~fdi_sim.linear.validate.expseek`,
+    as the validation flies it); only the throttle run moves it.
     """
     out = np.zeros(len(runs.doublets))
     lag = runs.engine_lag
     if lag is None or model is None or lag.state_name not in model.state_names:
         return out
     _, _, K = lag_row(model, lag)
-    r_up, r_down = math.exp(-runs.dt_s / lag.tau_up_s), math.exp(-runs.dt_s / lag.tau_down_s)
     for r, d in enumerate(runs.doublets):
-        if d.input_name != lag.input_name:
-            continue
-        z, peak = 0.0, 0.0
-        for t in K * runs.du[r]:  # N1 <- T + (N1 - T) exp(-dt / tau), tau by the direction of travel
-            z = t + (z - t) * (r_up if z < t else r_down)
-            peak = max(peak, abs(z))
-        out[r] = peak
+        if d.input_name == lag.input_name:
+            out[r] = float(np.max(np.abs(expseek(K * runs.du[r], runs.dt_s, lag))))
     return out
 
 

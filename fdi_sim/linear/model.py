@@ -60,6 +60,7 @@ class StepTerms:
 
     @property
     def n_passes(self) -> int:
+        """Passes measured (``P``, the first axis of ``Ax`` and ``Bu``)."""
         return self.Ax.shape[0]
 
     def select_inputs(self, idx: Sequence[int]) -> "StepTerms":

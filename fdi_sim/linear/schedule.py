@@ -15,8 +15,8 @@ File format (``.npz``, numpy, no pickle; loads in milliseconds)
           a model, shapes (K, n, n), (K, n, m), (K, p, n), (K, p, m), (K, n), (K, m), (K, p).
 ``step_Ax, step_Bu, step_Lf``  (optional) the step terms of every model
           (:class:`~fdi_sim.linear.model.StepTerms`: how the derivatives build up within JSBSim's
-          step), shapes (K, P, r, n), (K, P, r, m), (K, q, r); ``meta`` holds their step
-          ``step_dt_s``, ``n_rigid`` and ``lagged_outputs``. With them ``method="step"`` gives the
+          step), shapes (K, P, r, n), (K, P, r, m), (K, q, r); ``meta["meta"]["step"]`` holds their
+          ``dt_s``, ``n_rigid`` and ``lagged_outputs``. With them ``method="step"`` gives the
           discrete model of the simulation step (at the simulation's ``dt_s`` or a multiple of it).
 
 Lookup
@@ -37,7 +37,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -121,11 +121,6 @@ class ScheduledModel:
     indices: tuple[int, ...]
     weights: tuple[float, ...]
     distance: float
-
-
-def _op_to_json(op: OperatingPoint) -> dict[str, Any]:
-    return {k: getattr(op, k) for k in ("aircraft", "h_ft", "vt_kts", "vc_kts", "gamma_deg", "phi_deg", "psi_deg",
-                                        "flaps_deg", "icing_eta")}
 
 
 def _jsonable(x: Any) -> Any:
@@ -366,7 +361,7 @@ class ModelSchedule:
         p.parent.mkdir(parents=True, exist_ok=True)
         meta = {
             "format": FORMAT, "version": VERSION, "aircraft": self.aircraft, "names": self.names, "meta": self.meta,
-            "points": [{"op": _op_to_json(pt.op), "status": pt.status, "reason": pt.reason, "index": pt.index,
+            "points": [{"op": asdict(pt.op), "status": pt.status, "reason": pt.reason, "index": pt.index,
                         "sched": pt.sched, "trim": pt.trim, "info": pt.info} for pt in self.points],
         }
         np.savez(p, meta=np.array(json.dumps(_jsonable(meta))), **self.arrays)

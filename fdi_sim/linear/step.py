@@ -296,10 +296,5 @@ def equivalent_poles(model_d: LinearModel, min_abs_z: float = 0.3) -> NDArray[np
     return np.log(z) / model_d.dt_s
 
 
-def strip(model: LinearModel) -> LinearModel:
-    """The model without step terms (a change of ``A`` or ``B`` drops them by itself: :class:`LinearModel`)."""
-    return model if model.step is None else replace(model, step=None)
-
-
 __all__ = ["AB3", "DELAY_TOL", "StepTerms", "delay_increments", "engine_in_pass", "equivalent_poles", "lift",
-           "step_model", "strip"]
+           "step_model"]

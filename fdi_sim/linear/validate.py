@@ -162,18 +162,31 @@ def _simulate_batch(model: LinearModel, du: NDArray[np.float64], engine_lag: Eng
     xs = np.empty((N, model.n_states, R))
     xs[:1] = 0.0
     if engine_lag is not None:
+        # the lag row depends on its state and input only (lag_row checks): its trajectory comes first
         i, j, K = lag_row(model, engine_lag)
-        target = K * du[:, :, j].T  # (N, R)
-        r_up, r_down = math.exp(-model.dt_s / engine_lag.tau_up_s), math.exp(-model.dt_s / engine_lag.tau_down_s)
+        n1 = expseek(K * du[:, :, j].T, model.dt_s, engine_lag)  # z_1 .. z_N, (N, R)
     for k in range(N - 1):  # x_{k+1} = A x_k + B u_k
         x = xs[k + 1]
         np.matmul(A, xs[k], out=x)
         x += bu[k]
         if engine_lag is not None:
-            # FGTurboProp ExpSeek: N1 <- T + (N1 - T) exp(-dt / tau), tau by the direction of travel
-            z, t = xs[k, i], target[k]
-            x[i] = t + (z - t) * np.where(z < t, r_up, r_down)
+            x[i] = n1[k]
     return (model.C @ xs).transpose(2, 0, 1) + du @ model.D.T
+
+
+def expseek(target: NDArray[np.float64], dt_s: float, lag: EngineLag) -> NDArray[np.float64]:
+    """FGTurboProp's ExpSeek from 0 toward ``target`` (deviations, shape (N, ...)) [units of the target].
+
+    ``z_{k+1} = t_k + (z_k - t_k) exp(-dt / tau)``, ``tau = lag.tau_up_s`` while ``z_k < t_k``,
+    else ``lag.tau_down_s``; ``z_0 = 0``. Returns ``z_1 .. z_N``.
+    """
+    target = np.asarray(target, dtype=float)
+    r_up, r_down = math.exp(-dt_s / lag.tau_up_s), math.exp(-dt_s / lag.tau_down_s)
+    out = np.empty_like(target)
+    z = np.zeros(target.shape[1:])
+    for k, t in enumerate(target):
+        z = out[k] = t + (z - t) * np.where(z < t, r_up, r_down)
+    return out
 
 
 def lag_row(model: LinearModel, lag: EngineLag) -> tuple[int, int, float]:

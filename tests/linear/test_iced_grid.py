@@ -41,7 +41,9 @@ def test_iced_grid_trims_linearizes_and_reports_the_untrimmable_point() -> None:
     p0, p1 = status[(100.0, 0.0)], status[(100.0, 0.1)]
     assert _mode(p0, "short period")["wn_radps"] == pytest.approx(2.93, abs=0.03)
     assert _mode(p1, "short period")["wn_radps"] == pytest.approx(2.66, abs=0.03)
+    assert _mode(p0, "dutch roll")["wn_radps"] == pytest.approx(4.51, abs=0.05)
     assert _mode(p1, "dutch roll")["wn_radps"] == pytest.approx(3.91, abs=0.05)
+    assert _mode(p0, "roll")["re"] == pytest.approx(-4.49, abs=0.05)
     assert _mode(p1, "roll")["re"] == pytest.approx(-3.87, abs=0.05)
 
 

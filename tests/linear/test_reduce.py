@@ -105,10 +105,12 @@ def test_step_model_reduced_validates_like_the_full_one(name: str, op: Operating
     def worst(md: LinearModel) -> float:
         return float(np.max(compare(md, runs).nrmse_without(("throttle_cmd_norm",))))
 
-    assert full.n_states > 45 and red.n_states <= 25, (full.n_states, red.n_states)
+    # docs/linear.md: F-16 84 -> 21 states, 1.60 % both; DHC-6 51 -> 21, 1.93 % -> 1.92 %
+    assert (full.n_states, red.n_states) == ({"f16": 84, "DHC6": 51}[name], 21)
     assert "lag_states" in full.meta and "lag_states" not in red.meta  # the shift registers are gone
+    assert worst(full) == pytest.approx({"f16": 0.0160, "DHC6": 0.0193}[name], abs=5e-4)
     assert worst(red) < min(worst(full) + 0.002, 0.05), (worst(full), worst(red))
-    assert worst(reduce(full, 10, input_scale=su, output_scale=sy)) > 0.05
+    assert worst(reduce(full, 10, input_scale=su, output_scale=sy)) > 0.5  # F-16: r_radps 99 %
 
 
 def test_schedule_gives_reduced_models_scaled_by_its_validation(tmp_path) -> None:
