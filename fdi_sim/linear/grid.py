@@ -40,7 +40,7 @@ from itertools import product
 from pathlib import Path
 from typing import Any, Mapping
 
-from fdi_sim.data import AIRCRAFT_DATA  # aircraft/ in a checkout, packaged in a wheel
+from fdi_sim.data import aircraft_file  # aircraft/ in a checkout, packaged in a wheel
 from fdi_sim.errors import DesignError
 from fdi_sim.isa import vc_from_vt, vt_from_vc
 from fdi_sim.linear.validate import ValidationSettings
@@ -211,7 +211,7 @@ def grid_from_dict(data: Mapping[str, Any], source: str, aircraft: str | None = 
 
 def default_grid_path(aircraft: str) -> Path:
     """``aircraft/<aircraft>/grid.toml``."""
-    return AIRCRAFT_DATA / aircraft / "grid.toml"
+    return aircraft_file(aircraft, "grid.toml")
 
 
 def load_grid(path: str | Path, aircraft: str | None = None) -> GridSpec:
@@ -272,7 +272,7 @@ def parse_grid_spec(spec: str, aircraft: str) -> GridSpec:
 
 def named_grids(aircraft: str) -> dict[str, Path]:
     """The aircraft's shipped grids: ``default`` (``grid.toml``) and ``<name>`` (``grid_<name>.toml``)."""
-    folder = AIRCRAFT_DATA / aircraft
+    folder = aircraft_file(aircraft, "")
     out = {"default": default_grid_path(aircraft)} if default_grid_path(aircraft).exists() else {}
     out.update({f.stem.removeprefix("grid_"): f for f in sorted(folder.glob("grid_*.toml"))})
     return out
