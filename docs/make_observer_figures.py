@@ -24,8 +24,8 @@ from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_g
 from fdi_sim.detectors.beard_jones import angle_rad, beard_jones_gain  # noqa: E402
 from fdi_sim.detectors.kalman import KalmanInnovationDetector, MultipleModelBank, simulate_discrete, steady_state_kalman  # noqa: E402
 from fdi_sim.detectors.lmi_filter import design_lmi_filter, sensitivity_max_sv  # noqa: E402
-from fdi_sim.detectors.sidar_examples import SidarReading, sidar_bars, simulate_sidar  # noqa: E402
-from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim  # noqa: E402
+from fdi_sim.papers.sidar_examples import SidarReading, sidar_bars, simulate_sidar  # noqa: E402
+from fdi_sim.papers.twin_otter_interim import twin_otter_longitudinal_interim  # noqa: E402
 
 OUT = Path(__file__).parent / "figures"
 DT = 1 / 120

@@ -18,9 +18,9 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Ellipse  # noqa: E402
 from scipy.spatial import ConvexHull  # noqa: E402
 
-from fdi_sim.detectors.dhc6_icing_flights import FlightPlan, StudyConfig, fly, fly_all, linearize_models  # noqa: E402
-from fdi_sim.detectors.dhc6_icing_study import P_CANDIDATES, evaluate  # noqa: E402
-from fdi_sim.detectors.hagenblad_f16 import (  # noqa: E402
+from fdi_sim.papers.dhc6_icing_flights import FlightPlan, StudyConfig, fly, fly_all, linearize_models  # noqa: E402
+from fdi_sim.papers.dhc6_icing_study import P_CANDIDATES, evaluate  # noqa: E402
+from fdi_sim.papers.hagenblad_f16 import (  # noqa: E402
     PAPER_P_EQ28,
     PAPER_READING,
     f16_design,

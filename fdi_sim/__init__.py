@@ -14,6 +14,7 @@ Map of the package (data-flow order):
 - ``fdi_sim.flightlog``  MCAP writing, reading and repair
 - ``fdi_sim.study``      Monte Carlo campaigns
 - ``fdi_sim.review``     figures and reports from logs
+- ``fdi_sim.papers``     seed-paper reproductions and flight studies (they may fly simulations; nothing imports them)
 """
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ are Sidar's heuristic argument, not a convergence proof of the parameter estimat
 
 Continuous models are integrated between samples by RK4 with ``y`` interpolated linearly and ``u``
 held (``input_hold="zoh"``) or interpolated (``"foh"``); discrete models use eq. 23 directly.
-Sidar's sec. VI examples and the readings study are in :mod:`fdi_sim.detectors.sidar_examples`.
+Sidar's sec. VI examples and the readings study are in :mod:`fdi_sim.papers.sidar_examples`.
 """
 from __future__ import annotations
 

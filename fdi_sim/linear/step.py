@@ -39,7 +39,6 @@ from scipy.linalg import expm
 
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel, StepTerms
-from fdi_sim.linear.transform import lag_state_name
 
 #: third-order Adams-Bashforth weights of f_k, f_{k-1}, f_{k-2}
 AB3: tuple[float, float, float] = (23.0 / 12.0, -16.0 / 12.0, 5.0 / 12.0)
@@ -49,6 +48,12 @@ DELAY_TOL: float = 1e-4
 #: unit of the derivative of a state, by the unit suffix of the state
 _RATE_UNIT: dict[str, str] = {"fps": "fps2", "rad": "radps", "radps": "radps2", "ft": "fps", "pct": "pctps",
                               "rpm": "rpmps", "norm": "normps", "g": "gps"}
+
+
+def lag_state_name(output: str) -> str:
+    """``nz_g`` -> ``nz_lag_g``: the state holding an output one step late, unit last (step model and ``discretize``)."""
+    stem, _, unit = output.rpartition("_")
+    return f"{stem}_lag_{unit}" if stem else f"{output}_lag"
 
 
 def _split(name: str) -> tuple[str, str]:

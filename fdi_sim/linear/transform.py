@@ -12,6 +12,7 @@ import numpy as np
 
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
+from fdi_sim.linear.step import lag_state_name, step_model
 
 #: default detector rate: the simulation's 120 Hz
 DEFAULT_DT_S: float = 1.0 / 120.0
@@ -67,8 +68,6 @@ def discretize(model: LinearModel, dt_s: float = DEFAULT_DT_S, method: str = "zo
             raise DesignError(f"model is already discrete at {model.dt_s} s; discretize the continuous model at {dt_s} s")
         return model
     if method == "step":
-        from fdi_sim.linear.step import step_model
-
         return step_model(model, dt_s)
     if method == "zoh":
         d = model.discretize(dt_s)
@@ -92,12 +91,6 @@ def discretize(model: LinearModel, dt_s: float = DEFAULT_DT_S, method: str = "zo
     names = d.state_names + tuple(lag_state_name(d.output_names[i]) for i in lag)
     return replace(d, A=A, B=B, C=C, D=D, state_names=names, x0=np.concatenate([d.x0, d.y0[lag]]),
                    meta={**d.meta, "lag_states": list(names[n:])})
-
-
-def lag_state_name(output: str) -> str:
-    """``nz_g`` -> ``nz_lag_g``: the state holding an output one step late, unit last (also the step model's)."""
-    stem, _, unit = output.rpartition("_")
-    return f"{stem}_lag_{unit}" if stem else f"{output}_lag"
 
 
 def select(model: LinearModel, outputs: Sequence[str] | None = None, inputs: Sequence[str] | None = None) -> LinearModel:

@@ -13,7 +13,7 @@ import pytest
 from scipy.signal import place_poles
 
 from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, check_sidar_conditions, choose_sidar_gains, sidar_W
-from fdi_sim.detectors.sidar_examples import SIDAR_STEP_S, SidarReading, sidar_bars, sidar_gain_matrices, simulate_sidar
+from fdi_sim.papers.sidar_examples import SIDAR_STEP_S, SidarReading, sidar_bars, sidar_gain_matrices, simulate_sidar
 from fdi_sim.detectors.base import Detector
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
@@ -256,7 +256,7 @@ def test_bars_and_examples_are_the_text_of_sec_VI() -> None:
     5x10^-2, after 2.75 sec", "less than 10%, after 10 sec.". Fig. 9: tracking "less than 2x10^-2",
     after t = 12 "less than 10^-2 within 1.4 sec", "less than 10%, within 2.5 sec".
     """
-    from fdi_sim.detectors.sidar_examples import SidarBatch
+    from fdi_sim.papers.sidar_examples import SidarBatch
 
     inf = np.inf
     expected = {  # figure: (limit, window start [s], window end [s]) per statement, in order
@@ -303,7 +303,7 @@ def test_bad_input() -> None:
 
 def test_registered_observer_detectors_follow_the_contract() -> None:
     from fdi_sim import registry
-    from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim
+    from fdi_sim.papers.twin_otter_interim import twin_otter_longitudinal_interim
 
     m = twin_otter_longitudinal_interim()
     noise = {"process_std": [0.02, 2e-4, 1e-3, 1e-5], "sensor_std": [0.1, 0.002, 0.002, 0.002]}

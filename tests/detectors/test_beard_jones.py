@@ -9,7 +9,7 @@ from scipy.signal import place_poles
 from fdi_sim.detectors.base import Detector
 from fdi_sim.detectors.beard_jones import angle_rad, beard_jones_gain, detection_space, output_separability
 from fdi_sim.detectors.beard_jones_filter import BeardJonesBank, BeardJonesFilter, design_detection_filter, plan_bank
-from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim
+from fdi_sim.papers.twin_otter_interim import twin_otter_longitudinal_interim
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 

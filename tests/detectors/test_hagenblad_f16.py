@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from fdi_sim.detectors.hagenblad_f16 import (
+from fdi_sim.papers.hagenblad_f16 import (
     A_EQ23,
     BU_EQ24,
     PAPER_ISOLATION_PARITY,

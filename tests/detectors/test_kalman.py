@@ -1,6 +1,6 @@
 """Kalman innovation tests (Sidar 1982 sec. II-III, eq. 10) and the multiple-model bank.
 
-Twin Otter: ``twin_otter_longitudinal_interim()`` (INTERIM model, see fdi_sim/detectors/twin_otter_interim.py),
+Twin Otter: ``twin_otter_longitudinal_interim()`` (INTERIM model, see fdi_sim/papers/twin_otter_interim.py),
 discretized at 1/120 s.
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ from fdi_sim.detectors.kalman import (
     steady_state_kalman,
     whiteness_test,
 )
-from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim
+from fdi_sim.papers.twin_otter_interim import twin_otter_longitudinal_interim
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 

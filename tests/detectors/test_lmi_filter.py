@@ -1,6 +1,6 @@
 """LMI-optimal detection filter (Miller & Ribbens, App. B, Theorems 5.2.2 / 5.3.2) on the Twin Otter.
 
-The Twin Otter model is ``twin_otter_longitudinal_interim()`` (in ``fdi_sim/detectors/twin_otter_interim.py``):
+The Twin Otter model is ``twin_otter_longitudinal_interim()`` (in ``fdi_sim/papers/twin_otter_interim.py``):
 an INTERIM hand-built model from the JSBSim derivatives of JSBSIM_NOTES.md sec. 4.3, to be replaced by
 the linearizer's model. Every design takes the model as an argument.
 """
@@ -13,7 +13,7 @@ import scipy.linalg as sla
 from fdi_sim.detectors.base import Detector
 from fdi_sim.detectors.beard_jones import angle_rad
 from fdi_sim.detectors.lmi_filter import LmiDetectionFilter, design_lmi_filter, lmi_detection_gain
-from fdi_sim.detectors.twin_otter_interim import twin_otter_longitudinal_interim
+from fdi_sim.papers.twin_otter_interim import twin_otter_longitudinal_interim
 from fdi_sim.errors import DesignError
 
 V_TWIN = np.diag([1.0, 0.002, 0.002, 0.002]) ** 2  # sensor noise intensities: 1 ft/s, 2 mrad, 2 mrad/s, 2 mrad

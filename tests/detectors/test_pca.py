@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from fdi_sim.detectors.hagenblad_f16 import f16_faults, f16_model, f16_reading, simulate_f16
+from fdi_sim.papers.hagenblad_f16 import f16_faults, f16_model, f16_reading, simulate_f16
 from fdi_sim.detectors.parity import input_toeplitz, parity_space
 from fdi_sim.detectors.pca import (
     estimate_fault_signatures,

@@ -13,7 +13,7 @@ import pytest
 import scipy.linalg as sl
 from scipy import stats
 
-from fdi_sim.detectors.dhc6_icing_flights import (
+from fdi_sim.papers.dhc6_icing_flights import (
     LON_OUTPUTS,
     FlightPlan,
     StudyConfig,
@@ -24,7 +24,7 @@ from fdi_sim.detectors.dhc6_icing_flights import (
     linearize_models,
     windows,
 )
-from fdi_sim.detectors.dhc6_icing_study import (
+from fdi_sim.papers.dhc6_icing_study import (
     Relations,
     calibrate,
     choose_n_relations,

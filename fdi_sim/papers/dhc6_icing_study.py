@@ -4,7 +4,7 @@ The bar: with the clean and iced (eta 0.05, 0.1) linear models of one operating 
 parity relations (Lou, Willsky & Verghese 1986, sec. 3-4) should raise fewer false alarms on
 fault-free iced flight than the nominal (clean-model) parity space (Lou et al. eq. 4-8) at equal
 detection of an elevator fault, measured on real JSBSim flights
-(:mod:`fdi_sim.detectors.dhc6_icing_flights` flies them and builds the models).
+(:mod:`fdi_sim.papers.dhc6_icing_flights` flies them and builds the models).
 
 Relation sets (:func:`design_relations`), all on deviation windows ``[Y; U]`` about the clean trim:
 
@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from fdi_sim.detectors.dhc6_icing_flights import (
+from fdi_sim.papers.dhc6_icing_flights import (
     LON_OUTPUTS,
     LON_STATES,
     FlightPlan,
@@ -404,7 +404,7 @@ def evaluate(cfg: StudyConfig, ms: ModelSet, flights: dict[str, list[FlightSampl
     Detection is the fraction of windows with ``t > h`` among the windows that lie wholly in the
     fault interval; false alarms are counted on every window (after ``cfg.skip_s``) of the
     fault-free groups (``eta<e>``, flown at eta = e, see
-    :func:`~fdi_sim.detectors.dhc6_icing_flights.fly_all`).
+    :func:`~fdi_sim.papers.dhc6_icing_flights.fly_all`).
     """
     clean = ms.lon[0]
     nm = noise_model(flights["train"], clean, cfg.skip_s)

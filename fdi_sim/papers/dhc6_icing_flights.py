@@ -7,7 +7,7 @@ the elevator input as the *commanded elevator angle* ``g(elevator_cmd + pitch_tr
 (autopilot on, sensor noise on, turbulence, icing from t = 0, optional elevator bias fault) and
 :func:`flight_samples` samples its MCAP log at the model's sample time; :func:`windows` stacks
 deviation windows ``[Y; U]`` about the clean trim. The designs and statistics are in
-:mod:`fdi_sim.detectors.dhc6_icing_study`.
+:mod:`fdi_sim.papers.dhc6_icing_study`.
 
 Why the known elevator input is an angle and not the raw command: the DHC-6 flight-control
 system scales ``c = elevator_cmd + pitch_trim`` by 0.244 rad per unit trailing-edge down but by
