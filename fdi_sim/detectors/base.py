@@ -7,7 +7,7 @@ model's trim values ``u0``/``y0`` itself.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -37,7 +37,9 @@ class Residual:
     scores : NDArray or None
         Per-hypothesis isolation scores (angles [rad], probabilities...), in ``hypotheses`` order.
     valid : bool
-        False while the detector is still filling its window or converging.
+        False while the detector is still filling its window or converging, and whenever its
+        residual or statistic is not finite (:func:`finite_or_invalid`): a NaN is never a valid
+        "no alarm".
     """
 
     t_s: float
@@ -49,6 +51,21 @@ class Residual:
     isolation: str | None = None
     scores: NDArray[np.float64] | None = None
     valid: bool = True
+
+
+def finite_or_invalid(res: Residual) -> Residual:
+    """The same residual, marked invalid (``valid=False``, no alarm, no isolation) if its vector
+    ``r`` or its ``statistic`` is not all finite; unchanged otherwise.
+
+    A diverged filter gives NaN or inf, and ``nan > threshold`` is False: without this rule an
+    overflow would read as a valid "no alarm". Every detector's ``step`` should return through
+    it. ``scores`` are not checked (an angle to a zero direction is legitimately NaN); a detector
+    whose scores come from a state that can diverge checks that state itself.
+    """
+    ok = bool(np.isfinite(res.statistic) and np.all(np.isfinite(res.r)))
+    if ok:
+        return res
+    return replace(res, alarm=False, isolation=None, valid=False)
 
 
 @runtime_checkable
