@@ -9,6 +9,8 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import os
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -98,27 +100,84 @@ class Scenario:
         return self.model.model_dump_json()
 
 
+#: largest scenario file read [bytes]; shipped scenarios are a few kB (a guard against /dev/zero and the like)
+MAX_SCENARIO_BYTES = 1 << 20
+#: deepest nesting of tables and arrays a scenario may have; the deepest real key,
+#: ``faults[i].intermittent.windows_s[j][k]``, is 5 levels (tomllib and pydantic recurse per level)
+MAX_DEPTH = 16
+_BOM = "\ufeff"
+
+
 def load(path: str | Path) -> Scenario:
-    """Read and validate a scenario file."""
+    """Read and validate a scenario file.
+
+    Only a regular file of at most :data:`MAX_SCENARIO_BYTES` [bytes] is read (a symlink is
+    followed): a directory, a FIFO or a device such as ``/dev/zero`` is refused before any read,
+    so a wrong path can neither hang nor fill memory. The text must be UTF-8; a leading UTF-8
+    byte-order mark is accepted and dropped.
+    """
     p = Path(path)
     src = str(p)
     if p.suffix != ".toml":
         raise ScenarioError(src, "", "a scenario file must be TOML", "give a path ending in .toml")
+    return loads(_read_text(p, src), src)
+
+
+def _read_text(p: Path, src: str) -> str:
+    """The file's text, after checking what the path is (regular, small, readable, UTF-8)."""
     try:
-        text = p.read_text(encoding="utf-8")
+        # O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
         raise ScenarioError(src, "", "no such file", "check the path; `fdi-sim scenarios` lists the shipped ones") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(src, "", f"cannot read the file ({exc})", "check the path and permissions") from None
-    return loads(text, src)
+    except IsADirectoryError:
+        raise ScenarioError(src, "", "is a directory, not a scenario file", "give the path of a .toml file in it") from None
+    except PermissionError:
+        raise ScenarioError(src, "", "permission denied: the file cannot be read",
+                            "make it readable (chmod u+r) or copy it somewhere readable") from None
+    except OSError as exc:
+        raise ScenarioError(src, "", f"cannot open the file ({exc.strerror or exc})", "check the path") from None
+    mode = os.fstat(fd).st_mode  # of what was opened (a symlink followed), so no check-then-open race
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        kind = _FILE_KINDS.get(stat.S_IFMT(mode), "special file")
+        raise ScenarioError(src, "", f"is a {kind}, not a regular file",
+                            "give the path of a scenario .toml file (a symlink must point to a regular file)")
+    with os.fdopen(fd, "rb") as f:
+        try:
+            data = f.read(MAX_SCENARIO_BYTES + 1)  # never more than the limit, whatever fstat said
+        except OSError as exc:
+            raise ScenarioError(src, "", f"cannot read the file ({exc.strerror or exc})",
+                                "check the path and permissions") from None
+    if len(data) > MAX_SCENARIO_BYTES:
+        raise ScenarioError(src, "", f"file is larger than {MAX_SCENARIO_BYTES} bytes (scenario files are a few kB)",
+                            "give a scenario .toml file; put long data in the aircraft/ folder, not in the scenario")
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise ScenarioError(src, "", "file is UTF-16 text (it starts with a UTF-16 byte-order mark)", "save it as UTF-8")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise ScenarioError(src, "", f"not UTF-8 text: byte 0x{data[exc.start]:02x} at line {line} "
+                            f"(offset {exc.start}) cannot be decoded", "save the file as UTF-8") from None
+
+
+_FILE_KINDS = {
+    stat.S_IFDIR: "directory", stat.S_IFCHR: "character device", stat.S_IFBLK: "block device",
+    stat.S_IFIFO: "FIFO (named pipe)", stat.S_IFSOCK: "socket",
+}
 
 
 def loads(text: str, source: str = "<scenario>") -> Scenario:
-    """Validate scenario TOML text."""
+    """Validate scenario TOML text (a leading UTF-8 byte-order mark is dropped)."""
+    text = text.removeprefix(_BOM)  # tomllib reads U+FEFF as a bad statement ("Invalid statement (at line 1)")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"not valid TOML: {exc}", "fix the syntax at the line given") from None
+    except (RecursionError, MemoryError) as exc:  # tomllib recurses once per nested array or inline table
+        raise ScenarioError(source, "", f"the TOML nests too deeply to parse ({type(exc).__name__})",
+                            f"scenario values nest at most {MAX_DEPTH} levels: flatten the arrays") from None
     return from_dict(data, source, text)
 
 
@@ -126,6 +185,15 @@ def from_dict(data: Mapping[str, Any], source: str = "<scenario>", text: str | N
     """Validate a scenario given as nested dicts (what TOML parses to)."""
     if not isinstance(data, Mapping):
         raise ScenarioError(source, "", "a scenario must be a table of keys", "start from a file in scenarios/")
+    _check_depth(data, source)
+    try:
+        return _from_dict(data, source, text)
+    except (RecursionError, MemoryError) as exc:  # a bound, not a traceback, whatever slipped past _check_depth
+        raise ScenarioError(source, "", f"the scenario is too large or nests too deeply to validate ({type(exc).__name__})",
+                            f"scenario values nest at most {MAX_DEPTH} levels: flatten the arrays") from None
+
+
+def _from_dict(data: Mapping[str, Any], source: str, text: str | None) -> Scenario:
     _check_finite(data, source)
     try:
         model = ScenarioModel.model_validate(dict(data))
@@ -153,7 +221,8 @@ def from_dict(data: Mapping[str, Any], source: str = "<scenario>", text: str | N
                 try:  # strict as the sections are (schema.py); TOML arrays read as tuples
                     params = spec.params.model_validate(_tuples(dict(entry)), strict=True)
                 except ValidationError as exc:
-                    raise _to_scenario_error(exc, source, spec.params, prefix=key) from None
+                    raise (_typo_error(entry, spec.params, source, key)
+                           or _to_scenario_error(exc, source, spec.params, prefix=key)) from None
             entries.append((type_id, params))
         plugins[section] = tuple(entries)
     if text is None:
@@ -161,6 +230,44 @@ def from_dict(data: Mapping[str, Any], source: str = "<scenario>", text: str | N
     sc = Scenario(model=model, source=source, text=text, **plugins)
     _cross_checks(sc)
     return sc
+
+
+def _check_depth(data: Any, source: str) -> None:
+    """Refuse nesting deeper than :data:`MAX_DEPTH` (iteratively: the check itself cannot overflow)."""
+    stack: list[tuple[Any, str, int]] = [(data, "", 0)]
+    while stack:
+        node, key, depth = stack.pop()
+        if isinstance(node, Mapping):
+            items: Any = ((f"{key}.{k}" if key else str(k), v) for k, v in node.items())
+        elif isinstance(node, (list, tuple)):
+            items = ((f"{key}[{i}]", v) for i, v in enumerate(node))
+        else:
+            continue
+        if depth >= MAX_DEPTH:
+            raise ScenarioError(source, key, f"tables and arrays nest more than {MAX_DEPTH} levels deep here",
+                                f"no scenario key takes values nested deeper than {MAX_DEPTH} levels: flatten it")
+        stack.extend((v, k, depth + 1) for k, v in items)
+
+
+def _typo_error(entry: Mapping[str, Any], params: type[BaseModel], source: str, key: str) -> ScenarioError | None:
+    """A misspelt key of a plugin entry, when one is close to a key of ``params`` (else None).
+
+    Plugin models that allow extra keys (faults: unit-suffixed magnitudes) report a misspelt
+    required key as "missing" and never see the misspelling; this names it: ``unknown key
+    't_strat_s' (did you mean 't_start_s'?)``. Keys starting with a declared magnitude prefix
+    (``bias_`` in ``bias_deg``) are left to the plugin's own unit check.
+    """
+    fields = list(params.model_fields)
+    prefixes = tuple(f"{m}_" for m in getattr(params, "MAGNITUDES", {}) or {})
+    for name in entry:
+        if not isinstance(name, str) or name in fields or (prefixes and name.startswith(prefixes)):
+            continue
+        close = difflib.get_close_matches(name, fields, n=1, cutoff=0.6)
+        if close:
+            need = " (a required key)" if params.model_fields[close[0]].is_required() else ""
+            return ScenarioError(source, f"{key}.{name}", f"unknown key {name!r} (did you mean {close[0]!r}?)",
+                                 f"rename it to {close[0]}{need}")
+    return None
 
 
 def _check_finite(data: Any, source: str, key: str = "") -> None:
@@ -253,10 +360,10 @@ def _to_scenario_error(exc: ValidationError, source: str, model: type[BaseModel]
         if unitless:
             fix = f"keys carry their unit: write {' or '.join(unitless)}"
         elif close:
-            fix = f"did you mean {' or '.join(close)}?"
+            fix = f"rename it to {close[0]}" + (f" (or {close[1]})" if len(close) > 1 else "")
         else:
             fix = f"remove it; allowed keys here: {', '.join(known)}" if known else "remove it"
-        return ScenarioError(source, key, "unknown key", fix)
+        return ScenarioError(source, key, f"unknown key {name!r}" + (f" (did you mean {close[0]!r}?)" if close and not unitless else ""), fix)
     if typ == "missing":
         name = str(loc[-1]) if loc else key
         f = _model_fields(model, loc).get(name)
