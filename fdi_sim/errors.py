@@ -98,3 +98,10 @@ class RegistryError(FdiSimError, KeyError):
 
     def __str__(self) -> str:  # KeyError quotes its argument; keep the message readable
         return str(self.args[0]) if self.args else ""
+
+
+class CacheError(FdiSimError, OSError):
+    """The folder for fdi-sim's built JSBSim models cannot be used, nor a temporary one.
+
+    The message names the folder, the environment variable that chose it and the fix.
+    """

@@ -15,6 +15,7 @@ inputs) makes the rudder jump (JSBSIM_NOTES sec. 1.2, bug 1). The patch removes 
 """
 from __future__ import annotations
 
+import atexit
 import hashlib
 import os
 import shutil
@@ -25,6 +26,8 @@ from pathlib import Path
 from typing import Callable
 
 import jsbsim
+
+from fdi_sim.errors import CacheError
 
 
 def _patch_f16(root: ET.Element) -> None:
@@ -52,6 +55,13 @@ def _cache_base() -> Path:
     return Path(base) / "fdi-sim"
 
 
+def _cache_variable() -> str:
+    """Which setting chose the cache folder (for messages)."""
+    if os.environ.get("FDI_SIM_CACHE"):
+        return "FDI_SIM_CACHE"
+    return "XDG_CACHE_HOME" if os.environ.get("XDG_CACHE_HOME") else "HOME"
+
+
 def _fingerprint() -> str:
     h = hashlib.sha256()
     h.update(jsbsim.__version__.encode())
@@ -67,12 +77,53 @@ def _fingerprint() -> str:
     return h.hexdigest()[:16]
 
 
+#: roots built in a private temporary folder because the cache was unusable: fingerprint -> root
+_FALLBACK_ROOTS: dict[str, Path] = {}
+
+
 def jsbsim_root() -> Path:
-    """The JSBSim root folder holding the patched aircraft, built once per fingerprint [path]."""
+    """The JSBSim root folder holding the patched aircraft, built once per fingerprint [path].
+
+    It lives in ``$FDI_SIM_CACHE/fdi-sim`` (else ``$XDG_CACHE_HOME``, else ``~/.cache``). When
+    that folder cannot be used (a plain file in the path, no write permission, a read-only or
+    missing HOME), the root is built once per process in a private temporary folder, removed
+    at exit, and a one-line warning on stderr names the variable to set; the run still flies.
+
+    Raises
+    ------
+    CacheError
+        Neither the cache folder nor the temporary folder (``TMPDIR``) is usable.
+    """
+    fp = _fingerprint()
+    base = _cache_base()
+    dst = base / f"jsbsim-root-{fp}"
+    try:
+        if (dst / ".complete").exists():
+            return dst
+        return _build(dst)
+    except OSError as exc:  # PermissionError, NotADirectoryError, FileNotFoundError, read-only file system
+        if fp in _FALLBACK_ROOTS:
+            return _FALLBACK_ROOTS[fp]
+        try:
+            tmp_base = Path(tempfile.mkdtemp(prefix="fdi-sim-cache-"))
+            atexit.register(shutil.rmtree, tmp_base, ignore_errors=True)
+            root = _build(tmp_base / f"jsbsim-root-{fp}")
+        except OSError as exc2:
+            raise CacheError(
+                f"cannot build the JSBSim models: the cache folder {base} is unusable "
+                f"({exc.strerror or exc}) and so is the temporary folder ({exc2.strerror or exc2}). "
+                f"Fix: set FDI_SIM_CACHE to a writable folder (now chosen by {_cache_variable()}), "
+                "or TMPDIR to a writable temporary folder") from None
+        _FALLBACK_ROOTS[fp] = root
+        print(f"fdi-sim: warning: cache folder {base} is unusable ({exc.strerror or exc}); built the JSBSim models "
+              f"in {tmp_base} for this run only (set FDI_SIM_CACHE to a writable folder, now chosen by "
+              f"{_cache_variable()})", file=sys.stderr)
+        return root
+
+
+def _build(dst: Path) -> Path:
+    """Build the root at ``dst`` through a temporary sibling renamed into place (atomic) [path]."""
     wheel = Path(jsbsim.get_default_root_dir())
-    dst = _cache_base() / f"jsbsim-root-{_fingerprint()}"
-    if (dst / ".complete").exists():
-        return dst
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix="jsbsim-root-", dir=dst.parent))
     try:
@@ -94,6 +145,8 @@ def jsbsim_root() -> Path:
             os.rename(tmp, dst)  # atomic; another process may have won the race
         except OSError:
             shutil.rmtree(tmp, ignore_errors=True)
+            if not (dst / ".complete").exists():
+                raise
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
