@@ -235,7 +235,7 @@ class ShapingFilter:
     Attributes
     ----------
     A, B, C : NDArray
-        Shapes (6, 6), (6, 4), (6, 6).
+        Shapes (6, 6), (6, 4) at the simulation step or (6, 6) sampled slower, (6, 6).
     dt_s : float
         Sample time [s].
     dt_sim_s : float
@@ -376,8 +376,11 @@ def dryden_shaping_filter(params: DrydenParameters, vt_fps: float | None = None,
     for _ in range(int(round(n))):
         Q = A1 @ Q @ A1.T + B1 @ B1.T
         A = A1 @ A
-    B = B1 if round(n) == 1 else _factor(Q)
-    return ShapingFilter(A=A, B=B, C=np.eye(6), dt_s=float(dt_s), dt_sim_s=float(dt_sim_s))
+    if round(n) == 1:
+        return ShapingFilter(A=A, B=B1, C=np.eye(6), dt_s=float(dt_s), dt_sim_s=float(dt_sim_s))
+    # sampled every n steps the noise of the n steps has full rank: B_n B_n' = Q, six inputs
+    return ShapingFilter(A=A, B=_factor(Q), C=np.eye(6), dt_s=float(dt_s), dt_sim_s=float(dt_sim_s),
+                         input_names=tuple(f"nu_{i}" for i in range(6)))
 
 
 def with_airspeed(params: DrydenParameters, vt_fps: float) -> DrydenParameters:
@@ -390,10 +393,9 @@ def with_airspeed(params: DrydenParameters, vt_fps: float) -> DrydenParameters:
 
 
 def _factor(Q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """A (6, 4) ``B`` with ``B B' = Q`` (Q has rank 4: q, r are driven by the w, v inputs)."""
+    """A square ``B`` with ``B B' = Q`` (symmetric square root; Q may be singular)."""
     lam, V = np.linalg.eigh(0.5 * (Q + Q.T))
-    keep = np.argsort(lam)[::-1][:4]
-    return V[:, keep] * np.sqrt(np.clip(lam[keep], 0.0, None))
+    return V * np.sqrt(np.clip(lam, 0.0, None))
 
 
 def euler_to_body(phi_rad: float, theta_rad: float, psi_rad: float) -> NDArray[np.float64]:
