@@ -43,14 +43,32 @@ class TrimError(FdiSimError, RuntimeError):
     aircraft : str
         Aircraft id (``"f16"``, ``"DHC6"``).
     point : str
-        Human-readable operating point.
+        Human-readable operating point (without the aircraft id: ``"h=5000 ft VC=150 kt"``).
     reason : str
         Why the trim failed (residual, limit hit, JSBSim's message).
+    fix : str, optional
+        What to change in the operating point.
+    source : str, optional
+        The scenario file the point came from ("" when built in Python).
+    key : str, optional
+        The scenario key of the point (``"initial"``), or "".
     """
 
-    def __init__(self, aircraft: str, point: str, reason: str) -> None:
-        self.aircraft, self.point, self.reason = aircraft, point, reason
-        super().__init__(f"cannot trim {aircraft} at {point}: {reason}")
+    def __init__(self, aircraft: str, point: str, reason: str, fix: str = "", source: str = "", key: str = "") -> None:
+        self.aircraft, self.point, self.reason, self.fix = aircraft, point, reason, fix
+        self.source, self.key = source, key
+        where = "".join(f"{part}: " for part in (source, key) if part)
+        msg = f"{where}cannot trim {aircraft} at {point}: {reason}"
+        if fix:
+            msg += f" Fix: {fix}"
+        super().__init__(msg)
+
+    def with_source(self, source: str, key: str = "initial") -> "TrimError":
+        """The same error, located in a scenario file: the message starts with ``"source: key: "``."""
+        return TrimError(self.aircraft, self.point, self.reason, self.fix, str(source), key)
+
+    def __reduce__(self) -> tuple:  # pickle (study workers) rebuilds from the fields, not the message
+        return (TrimError, (self.aircraft, self.point, self.reason, self.fix, self.source, self.key))
 
 
 class SimulationDiverged(FdiSimError, RuntimeError):

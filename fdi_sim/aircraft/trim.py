@@ -14,7 +14,10 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import re
 import sys
+import tempfile
+import tomllib
 from dataclasses import dataclass
 
 import jsbsim
@@ -22,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.aircraft.model import Aircraft
+from fdi_sim.data import aircraft_base, aircraft_file
 from fdi_sim.errors import TrimError
 from fdi_sim.operating_point import OperatingPoint
 from fdi_sim.units import G0_FPS2, RAD_PER_DEG
@@ -103,16 +107,17 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
         limit, the residual reached), or ``op.icing_eta > 0`` on an aircraft loaded without
         the icing overlay.
     """
+    point = _point(op)
     if op.aircraft != ac.name:
-        raise TrimError(ac.name, op.label(), f"operating point is for {op.aircraft!r}")
+        raise TrimError(ac.name, point, f"the operating point is for {op.aircraft!r}", f"load Aircraft({op.aircraft!r})")
     if ac.icing:
         ac.icing_writer()(op.icing_eta)  # the iced model trims at the point's eta (0 flies clean)
     elif op.icing_eta:
-        raise TrimError(ac.name, op.label(), f"icing_eta = {op.icing_eta:g} needs the icing overlay: "
+        raise TrimError(ac.name, point, f"icing_eta = {op.icing_eta:g} needs the icing overlay",
                         f"load Aircraft({ac.name!r}, icing=True)")
     fdm = ac.fdm
-    fdm["aero/alpha-min-rad"] = -0.25  # JSBSim searches alpha in [-5, 20] deg by default; flaps need less
-    fdm["aero/alpha-max-rad"] = 0.35
+    fdm["aero/alpha-min-rad"] = ALPHA_MIN_RAD  # JSBSim searches alpha in [-5, 20] deg by default; flaps need less
+    fdm["aero/alpha-max-rad"] = ALPHA_MAX_RAD
     _set_ic(ac, op)
     if ac.name == "f16":
         fdm["gear/gear-cmd-norm"] = 0.0  # the FCS starts with the gear down (CDgear 0.027)
@@ -126,51 +131,188 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
     fdm.set_trim_status(False)
     mode = 5 if (op.phi_deg and ac.name == "f16") else 1
     jsb_error = ""
-    try:
-        with _quiet_stdout():  # JSBSim's trimmer prints its progress to C stdout
+    with _captured_stdout() as out:  # JSBSim's trimmer prints its report to C stdout
+        level = fdm.get_debug_level()
+        if out.active:
+            fdm.set_debug_level(1)  # level 1 prints the per-axis report of a failed trim (FGTrimAxis::AxisReport)
+        try:
             fdm["simulation/do_simple_trim"] = mode
-    except jsbsim.TrimFailureError as exc:
-        jsb_error = str(exc) or "JSBSim trim failed"
+        except jsbsim.TrimFailureError as exc:
+            jsb_error = str(exc) or "JSBSim trim failed"
+        finally:
+            fdm.set_debug_level(level)
     if ac.name == "f16":
         if jsb_error:
-            raise TrimError(ac.name, op.label(), jsb_error)
+            raise TrimError(ac.name, point, _jsbsim_failure(ac, jsb_error, parse_trim_report(out.text)),
+                            _envelope_fix(ac, op))
         fdm.get_propulsion().get_steady_state()
         res = float(np.max(np.abs(_tiny_step_accelerations(ac))))
         result = _result(ac, op, res, "jsbsim", psidot=_turn_rate_radps(op.phi_deg, ac["velocities/vt-fps"]))
     else:
         fdm.get_propulsion().get_steady_state()  # avoid the N1 -> idle reset on the first step
         result = trim_running(ac, op, jsb_error)
-    limit = _at_limit(result)
+    limit, limit_fix = _at_limit(result)
     if not result.residual < TRIM_TOL:
         # a control at its limit is the likely cause (e.g. the iced DHC-6 at 120 KIAS: throttle 1.0)
-        why = f"; best point: {limit}" if limit else (
-            f"; best point (no command at its limit): alpha {math.degrees(result.alpha_rad):.2f} deg, throttle_cmd_norm "
-            f"{result.throttle_cmd_norm:.3f}, elevator_cmd_norm {result.elevator_cmd_norm:.3f}, pitch_trim_cmd_norm "
-            f"{result.pitch_trim_cmd_norm:.3f}")
-        raise TrimError(ac.name, op.label(),
-                        f"residual {result.residual:.3g} above {TRIM_TOL} ({jsb_error or 'no JSBSim message'}){why}")
+        acc = _tiny_step_accelerations(ac) / _ACC_W  # at the best point (the state is left there)
+        worst = np.argsort(-np.abs(acc * _ACC_W))[:2]
+        left = ", ".join(f"{_ACC_NAMES[i]} = {acc[i]:.3g} {_ACC_UNITS[i]}" for i in worst)
+        method = "the running-engine trim" if result.method == "running" else "the check after JSBSim's trim"
+        jsb = f"JSBSim's own trim: {jsb_error}" if jsb_error else "JSBSim's own trim passed"
+        if limit:
+            why, fix = f"best point: {limit}", limit_fix
+        else:
+            why = (f"best point (no command at its limit): alpha {math.degrees(result.alpha_rad):.2f} deg, "
+                   f"throttle_cmd_norm {result.throttle_cmd_norm:.3f}, elevator_cmd_norm {result.elevator_cmd_norm:.3f}, "
+                   f"pitch_trim_cmd_norm {result.pitch_trim_cmd_norm:.3f}")
+            fix = _envelope_fix(ac, op)
+        raise TrimError(ac.name, point,
+                        f"{method} stopped at residual {result.residual:.3g} (weighted body accelerations; accepted "
+                        f"below {TRIM_TOL}; largest: {left}; {jsb}); {why}", fix)
     if limit:
-        raise TrimError(ac.name, op.label(), limit)
+        raise TrimError(ac.name, point, limit, limit_fix)
     return result
 
 
+def _envelope_fix(ac: Aircraft, op: OperatingPoint) -> str:
+    """What to change when no single command explains a failed trim: the way back into the trim
+    envelope of ``aircraft/<name>/grid.toml`` (read here, so the message and the grid agree)."""
+    name = ac.name
+    try:
+        env = tomllib.loads(aircraft_file(name, "grid.toml").read_text(encoding="utf-8")).get("envelope", {})
+    except (OSError, ValueError):  # no grid file for this aircraft: a generic fix
+        env = {}
+    vc_kts, mach = ac.fdm["velocities/vc-kts"], ac.fdm["velocities/mach"]  # at the point asked for (or the best one)
+    (vc_lo, vc_hi), (h_lo, h_hi) = env.get("vc_kts", (0.0, math.inf)), env.get("h_ft", (0.0, math.inf))
+    mach_hi = env.get("mach", (0.0, 0.0))[1] or math.inf
+    flaps = name.startswith("DHC6")
+    todo = []
+    if vc_kts < vc_lo:
+        todo.append(f"fly faster: at least {vc_lo:g} KCAS (initial.vc_kts, or vt_kts)"
+                    + (" or add initial.flaps_deg (up to 20)" if flaps else ""))
+    if vc_kts > vc_hi or mach > mach_hi:
+        todo.append(f"fly slower: at most {vc_hi:g} KCAS" + (f" and Mach {mach_hi:g}" if mach_hi < math.inf else ""))
+    if op.h_ft > h_hi:
+        todo.append(f"fly lower: initial.h_ft at most {h_hi:g}")
+    where = f"aircraft/{aircraft_base(name)}/grid.toml"
+    if not env:
+        return "try a lower initial.h_ft or another speed (initial.vc_kts / vt_kts)"
+    span = f"{vc_lo:g}-{vc_hi:g} KCAS, {h_lo:g}-{h_hi:g} ft" + (f", Mach <= {mach_hi:g}" if mach_hi < math.inf else "")
+    if todo:
+        return "; ".join(todo) + f" (the trim envelope in {where}: {span}{'' if flaps else '; the F-16 has no pilot flaps'})"
+    return (f"the point is inside the trim envelope in {where} ({span}) but does not trim here: try a nearby speed "
+            "(initial.vc_kts / vt_kts) or altitude (initial.h_ft)" + (", or initial.flaps_deg" if flaps else ""))
+
+
+_ACC_NAMES = ("udot", "vdot", "wdot", "pdot", "qdot", "rdot")
+_ACC_UNITS = ("ft/s^2", "ft/s^2", "ft/s^2", "rad/s^2", "rad/s^2", "rad/s^2")
+#: alpha search range of the trims [rad] (-14.3 to 20.1 deg)
+ALPHA_MIN_RAD = -0.25
+ALPHA_MAX_RAD = 0.35
+
+
+def _point(op: OperatingPoint) -> str:
+    """The operating point without its aircraft id (the error names the aircraft once)."""
+    return op.label().removeprefix(f"{op.aircraft} ")
+
+
+@dataclass(frozen=True)
+class TrimAxisReport:
+    """One line of JSBSim's report of a failed trim (``FGTrimAxis::AxisReport``).
+
+    Attributes
+    ----------
+    control : str
+        JSBSim's control name (``"Angle of Attack"``, ``"Throttle"``, ``"Pitch Trim"``).
+    control_value : float
+        The control's last value [deg for angles, normalized otherwise].
+    state : str
+        The acceleration it trims (``"udot"``, ``"wdot"``, ``"qdot"``, ...).
+    state_value : float
+        That acceleration [ft/s^2 for udot/vdot/wdot, rad/s^2 for pdot/qdot/rdot].
+    tolerance : float
+        JSBSim's tolerance on it [same unit].
+    passed : bool
+        Whether JSBSim counted the axis as trimmed.
+    """
+
+    control: str
+    control_value: float
+    state: str
+    state_value: float
+    tolerance: float
+    passed: bool
+
+
+_AXIS_LINE = re.compile(
+    r"^\s*(?P<control>[A-Za-z][A-Za-z ]*?)\s*:\s*(?P<cval>\S+)\s+(?P<state>[a-z]+)\s*:\s*(?P<sval>\S+)"
+    r"\s+Tolerance:\s*(?P<tol>\S+)\s+(?P<status>Passed|Failed)\s*$", re.MULTILINE)
+
+
+def parse_trim_report(text: str) -> tuple[TrimAxisReport, ...]:
+    """The axis lines of JSBSim's trim report (empty when it printed none, e.g. another JSBSim version)."""
+    out = []
+    for m in _AXIS_LINE.finditer(text):
+        try:
+            out.append(TrimAxisReport(m["control"], float(m["cval"]), m["state"], float(m["sval"]), float(m["tol"]),
+                                      m["status"] == "Passed"))
+        except ValueError:  # a value JSBSim printed as nan or garbled: skip the line, keep the others
+            continue
+    return tuple(out)
+
+
+def _jsbsim_failure(ac: Aircraft, jsb_error: str, axes: tuple[TrimAxisReport, ...]) -> str:
+    """Why JSBSim's trim failed: the axes it did not trim, and the flight condition."""
+    fdm = ac.fdm
+    cond = (f"the point is VC {fdm['velocities/vc-kts']:.0f} kt, Mach {fdm['velocities/mach']:.2f}, "
+            f"dynamic pressure {fdm['aero/qbar-psf']:.0f} psf")
+    failed = [a for a in axes if not a.passed]
+    if not failed:
+        return f"JSBSim's trim reported {jsb_error!r} (no axis report); {cond}"
+    unit = {"udot": "ft/s^2", "vdot": "ft/s^2", "wdot": "ft/s^2"}
+    parts = "; ".join(
+        f"{a.state} = {a.state_value:.3g} {unit.get(a.state, 'rad/s^2')} (tolerance {a.tolerance:g}) with "
+        f"{a.control.lower()} {a.control_value:g}{' deg' if a.control in _ANGLE_CONTROLS else ''}" for a in failed)
+    hint = "".join(f"; {_AXIS_HINTS[a.state]}" for a in failed[:1] if a.state in _AXIS_HINTS)
+    return f"JSBSim's trim reported {jsb_error!r}: not trimmed: {parts} (its last iterate){hint}; {cond}"
+
+
+_ANGLE_CONTROLS = {"Angle of Attack", "Roll Angle", "Beta", "Flight Path Angle", "Heading", "Theta"}
+_AXIS_HINTS = {
+    "wdot": "the wing cannot carry the weight within the alpha range (too slow or too high)",
+    "udot": "thrust and drag do not balance (too fast, too slow or too high for the engine)",
+    "qdot": "the pitch trim cannot balance the pitching moment",
+}
+
+
+class _Captured:
+    """What :func:`_captured_stdout` caught: ``active`` when fd 1 was redirected, then ``text``."""
+
+    def __init__(self) -> None:
+        self.active = False
+        self.text = ""
+
+
 @contextlib.contextmanager
-def _quiet_stdout():
-    """Silence C-level stdout (file descriptor 1) for the duration."""
+def _captured_stdout():
+    """Capture C-level stdout (file descriptor 1) for the duration; the text is in ``.text`` after."""
+    cap = _Captured()
     try:
         sys.stdout.flush()
         saved = os.dup(1)
     except (OSError, ValueError):  # no real fd 1 (e.g. captured in a notebook): leave it
-        yield
+        yield cap
         return
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
+    with tempfile.TemporaryFile() as buf:
+        try:
+            os.dup2(buf.fileno(), 1)
+            cap.active = True
+            yield cap
+        finally:
+            os.dup2(saved, 1)
+            os.close(saved)
+            buf.seek(0)
+            cap.text = buf.read(1 << 20).decode("utf-8", errors="replace")  # the report is a few hundred bytes
 
 
 def _set_ic(ac: Aircraft, op: OperatingPoint) -> None:
@@ -263,8 +405,8 @@ def trim_running(ac: Aircraft, op: OperatingPoint, jsb_error: str = "") -> TrimR
             fdm["fcs/pitch-trim-cmd-norm"], fdm["fcs/aileron-cmd-norm"], fdm["fcs/rudder-cmd-norm"],
         ])
     h = np.array([1e-4, 1e-4, 1e-3, 1e-3, 1e-3, 1e-3])
-    lo = np.array([-0.25, -1.2, 0.0, -1.0, -1.0, -1.0])
-    hi = np.array([0.35, 1.2, 1.0, 1.0, 1.0, 1.0])
+    lo = np.array([ALPHA_MIN_RAD, -1.2, 0.0, -1.0, -1.0, -1.0])
+    hi = np.array([ALPHA_MAX_RAD, 1.2, 1.0, 1.0, 1.0, 1.0])
     best = (np.inf, z.copy())
     for _ in range(_MAX_ITER):
         r = _running_residual(ac, st, z)
@@ -302,15 +444,40 @@ def _result(ac: Aircraft, op: OperatingPoint, res: float, method: str, psidot: f
     )
 
 
-def _at_limit(t: TrimResult) -> str:
-    limits = {
-        "throttle_cmd_norm": (0.0, 1.0), "pitch_trim_cmd_norm": (-1.0, 1.0),
-        "aileron_cmd_norm": (-1.0, 1.0), "rudder_cmd_norm": (-1.0, 1.0),
-    }
-    if t.op.aircraft == "f16":
-        limits["throttle_cmd_norm"] = (0.0, 0.5)  # above 0.5 is afterburner: not a cruise trim
-    for name, (lo, hi) in limits.items():
+#: F-16 throttle command above which the F100 is in afterburner [-] (not a cruise trim)
+F16_AFTERBURNER_THROTTLE_NORM = 0.5
+#: a command this close to a stop counts as at it [-]
+_AT_STOP = 1e-3
+_SLOWER_OR_LOWER = "fly slower (initial.vc_kts / vt_kts) or lower (initial.h_ft)"
+_BANK = "a smaller bank (initial.phi_deg) or a higher speed"
+_PITCH = "change the speed (initial.vc_kts / vt_kts), or initial.flaps_deg on the DHC-6"
+#: command -> (range [-], what the upper stop means, what the lower stop means, fix at the upper, fix at the lower)
+_STOPS: dict[str, tuple[tuple[float, float], str, str, str, str]] = {
+    "throttle_cmd_norm": ((0.0, 1.0), "full throttle is not enough thrust", "idle is still too much thrust",
+                          _SLOWER_OR_LOWER, "a climb (initial.gamma_deg > 0) or a higher speed"),
+    "pitch_trim_cmd_norm": ((-1.0, 1.0), "the pitch trim cannot balance the pitching moment",
+                            "the pitch trim cannot balance the pitching moment", _PITCH, _PITCH),
+    "aileron_cmd_norm": ((-1.0, 1.0), "the ailerons cannot hold the bank", "the ailerons cannot hold the bank",
+                         _BANK, _BANK),
+    "rudder_cmd_norm": ((-1.0, 1.0), "the rudder cannot hold the sideslip", "the rudder cannot hold the sideslip",
+                        _BANK, _BANK),
+}
+
+
+def _at_limit(t: TrimResult) -> tuple[str, str]:
+    """``(problem, fix)`` for the first command at a stop of its range, or ``("", "")``.
+
+    The F-16's throttle is also refused above :data:`F16_AFTERBURNER_THROTTLE_NORM`: that is not
+    a stop of the command (its range is [0, 1]) but the afterburner detent, and is said so.
+    """
+    for name, ((lo, hi), up, down, fix_up, fix_down) in _STOPS.items():
         v = getattr(t, name)
-        if v <= lo + 1e-3 or v >= hi - 1e-3:
-            return f"{name} = {v:.3f} at its limit [{lo}, {hi}] (not enough control power or thrust)"
-    return ""
+        if v >= hi - _AT_STOP:
+            return f"{name} = {v:.3f} at its limit (the upper stop of its range [{lo:g}, {hi:g}]: {up})", fix_up
+        if v <= lo + _AT_STOP:
+            return f"{name} = {v:.3f} at its limit (the lower stop of its range [{lo:g}, {hi:g}]: {down})", fix_down
+    if t.op.aircraft == "f16" and t.throttle_cmd_norm > F16_AFTERBURNER_THROTTLE_NORM + _AT_STOP:
+        return (f"throttle_cmd_norm = {t.throttle_cmd_norm:.3f} is above {F16_AFTERBURNER_THROTTLE_NORM:g}, the "
+                "afterburner detent (range [0, 1]): the point needs afterburner thrust, which is not a cruise trim",
+                "fly slower (initial.vt_kts / vc_kts; the F-16 trims up to 600 KCAS and Mach 0.72) or higher (initial.h_ft)")
+    return "", ""
