@@ -15,10 +15,14 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+import signal
 import struct
+import threading
 import zlib
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 from mcap.opcode import Opcode
@@ -71,6 +75,42 @@ def _string_map(m: Mapping[str, str]) -> bytes:
 
 def _record(opcode: int, body: bytes) -> bytes:
     return struct.pack("<BQ", opcode, len(body)) + body
+
+
+#: the signals that end a run (Ctrl-C, ``kill``/``timeout``/batch schedulers/study engines)
+STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextmanager
+def signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM while a block writes records; deliver them after it.
+
+    A KeyboardInterrupt raised between ``file.write`` and the position update, or after a
+    channel's rows were taken and before their chunk was written, used to leave a file whose
+    footer pointed 9,675 bytes early or a summary counting rows that were never written
+    (issue 11). The block runs to its end; a signal that arrived meanwhile is then passed to the
+    handler that was installed before (so Ctrl-C still raises, just not inside a record). Only
+    the main thread receives Python signal handlers; elsewhere this does nothing. Cost: four
+    ``signal.signal`` calls, once per flush (about once per simulated second).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    before = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    for s in STOP_SIGNALS:
+        signal.signal(s, lambda signum, _frame: held.append(signum))
+    try:
+        yield
+    finally:
+        for s, h in before.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+        for signum in held[:1]:  # one delivery is enough: the handler decides what it means
+            h = before[signal.Signals(signum)]
+            if callable(h):
+                h(signum, None)
+            elif h == signal.SIG_DFL:
+                signal.raise_signal(signum)
 
 
 class McapFileWriter:
@@ -191,11 +231,20 @@ class McapFileWriter:
         """Push everything written so far to the operating system (survives SIGKILL)."""
         self._f.flush()
 
+    def move_to(self, path: str | Path) -> None:
+        """Rename the open file to ``path`` (atomic on one file system; replaces ``path``)."""
+        os.replace(self.path, path)
+        self.path = Path(path)
+
     # -- summary and footer ----------------------------------------------------------------
     def finish(self) -> None:
         """Write Data End, the summary section, the footer and the closing magic; close."""
         if not self._open:
             return
+        with signals_deferred():
+            self._finish()
+
+    def _finish(self) -> None:
         try:
             self._write(_record(Opcode.DATA_END, struct.pack("<I", self._crc)))
             summary_start = self._pos
@@ -246,7 +295,7 @@ class McapFileWriter:
 class VectorChannel:
     """A vector channel of a :class:`FlightLogWriter`; get one from ``add_vector_channel``."""
 
-    __slots__ = ("_w", "topic", "schema", "channel_id", "_t", "_b", "_shape", "_pack", "_seq")
+    __slots__ = ("_w", "topic", "schema", "channel_id", "_t", "_b", "_shape", "_pack", "_seq", "_last_t_s")
 
     def __init__(self, writer: FlightLogWriter, topic: str, schema: VectorSchema, channel_id: int) -> None:
         self._w = writer
@@ -258,11 +307,22 @@ class VectorChannel:
         self._shape = (schema.n_values,)
         self._pack = struct.Struct(f"<{schema.n_values}d").pack
         self._seq = 0
+        self._last_t_s: float | None = None
 
     @property
     def fields(self) -> tuple[str, ...]:
         """Field names, ``t_s`` first."""
         return self.schema.fields
+
+    @property
+    def rows_written(self) -> int:
+        """Rows written so far (flushed or still buffered)."""
+        return self._seq + len(self._t)
+
+    @property
+    def last_t_s(self) -> float | None:
+        """Time of the last row written [s], or None before the first."""
+        return self._t[-1] if self._t else self._last_t_s
 
     def write(self, t_s: float, values: Any) -> None:
         """Log one row.
@@ -318,6 +378,7 @@ class VectorChannel:
         values = np.frombuffer(b"".join(self._b), dtype="<f8").reshape(n, self.schema.n_values)
         block = VectorBlock(self.channel_id, self._seq, t_s, values)
         self._seq += n
+        self._last_t_s = self._t[-1]
         self._t = []
         self._b = []
         return block
@@ -499,6 +560,20 @@ class FlightLogWriter:
         that flush is in the operating system's hands, so it survives a SIGKILL."""
         return self._last_flush_t_s
 
+    def move_to(self, path: str | Path) -> None:
+        """Rename the log file to ``path`` while it stays open (replacing a file there).
+
+        :func:`fdi_sim.sim.run` writes a new log under a temporary name next to its final path
+        and moves it there only once the run is trimmed and flying, so a run that fails to start
+        leaves an existing log at that path untouched.
+        """
+        self._check_open()
+        try:
+            self._file.move_to(path)
+        except OSError as exc:
+            raise LogError(str(path), f"cannot move the new log here ({exc.strerror})") from None
+        self.path = Path(path)
+
     @property
     def closed(self) -> bool:
         """True after :meth:`close`."""
@@ -515,6 +590,12 @@ class FlightLogWriter:
             self._io(self._file.finish)
         finally:
             self._file.abort()  # no-op after a clean finish
+
+    def abort(self) -> None:
+        """Close the file as it is, without flushing the buffers or writing a summary."""
+        self._closed = True
+        self._hi_t_s = -math.inf
+        self._file.abort()
 
     # -- internals -------------------------------------------------------------------------
     def _check_open(self) -> None:
@@ -552,7 +633,14 @@ class FlightLogWriter:
             self._hi_t_s = k * self.flush_period_s
 
     def _write_pending(self) -> float | None:
-        """Write the buffered messages as one chunk, flush; return their latest time [s]."""
+        """Write the buffered messages as one chunk, flush; return their latest time [s].
+
+        Signals are held for the whole of it: rows taken from the buffers are always written.
+        """
+        with signals_deferred():
+            return self._write_pending_now()
+
+    def _write_pending_now(self) -> float | None:
         blocks: list[VectorBlock] = []
         # channels written at every step hold equal times: convert them once and share the
         # array, which also lets build_chunk recognise the regular layout by identity

@@ -3,19 +3,25 @@
 Per step (dt = 1/rate_hz), at time t:
   truth x(t) -> sensors -> y(t) -> pilot (autopilot + maneuvers) -> commands u(t) -> JSBSim step
 and everything is logged with time stamp t. A run ends ``completed``, ``diverged`` (NaN, ground
-impact, departure beyond the scenario's limits), ``interrupted`` (Ctrl-C) or ``error``; the MCAP
-log is closed in ``finally`` in every case, so it is always readable.
+impact, departure beyond the scenario's limits), ``interrupted`` (Ctrl-C, SIGTERM) or ``error``;
+once the flight has started the MCAP log is closed in ``finally`` in every case, so it is always
+readable. A run that fails before it flies writes nothing at its log path.
 """
 from __future__ import annotations
 
 import importlib.metadata
 import json
 import math
+import os
 import platform
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -24,7 +30,7 @@ from fdi_sim.aircraft import (
     COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, TrimResult, hold_trim_in_wind, trim,
 )
 from fdi_sim.aircraft.model import wind_ned_fps
-from fdi_sim.errors import LogError, SimulationDiverged
+from fdi_sim.errors import LogError, ScenarioError, SimulationDiverged, TrimError
 from fdi_sim.faults.injector import FaultInjector
 from fdi_sim.flightlog import (
     FAULT_EVENT_JSON_SCHEMA,
@@ -42,6 +48,7 @@ from fdi_sim.flightlog import (
     TOPIC_TRUTH_STATE,
     FlightLogWriter,
 )
+from fdi_sim.flightlog.records import MCAP_MAGIC
 from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimPoint
 from fdi_sim.scenario import Scenario
 from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
@@ -51,6 +58,69 @@ OP_SIGNALS = ("h_ft", "vc_kts", "mach", "alpha_rad", "flaps_deg", "icing_eta")
 # the pitch trim is set by the trim and held; logged so that detectors using the commands see the
 # whole elevator command (elevator + pitch trim) without recovering it from the surface
 PILOT_FIELDS = COMMAND_SIGNALS + ("h_ref_ft", "vc_ref_kts", "psi_ref_rad", "phi_ref_rad", "pitch_trim_cmd_norm")
+
+class RunInterrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived before the flight started: no log was written.
+
+    A KeyboardInterrupt, so code that catches Ctrl-C keeps working.
+
+    Parameters
+    ----------
+    reason : str
+        Which signal.
+    log_path : str
+        The log path that was left as it was.
+    """
+
+    def __init__(self, reason: str, log_path: str) -> None:
+        self.reason, self.log_path = reason, log_path
+        super().__init__(f"{reason} before the flight started: no log written ({log_path} left as it was)")
+
+
+_SIGNAL_REASONS = {signal.SIGINT: "stopped by the user (Ctrl-C, SIGINT)", signal.SIGTERM: "stopped by SIGTERM"}
+
+
+class StopRequest:
+    """SIGINT and SIGTERM during a run: an exception before the flight, a flag during it.
+
+    Before :meth:`start_flight` a signal raises KeyboardInterrupt at once (a trim can take
+    seconds and writes nothing that must survive). After it, the handler only sets
+    :attr:`requested`, which the loop reads at the top of each step: the run ends between two
+    steps, never inside a log write (issue 11: 10 of 52 Ctrl-C runs lost rows or their index).
+    """
+
+    __slots__ = ("requested", "reason", "_flying")
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.reason = ""
+        self._flying = False
+
+    def start_flight(self) -> None:
+        """From now on a signal only sets the flag."""
+        self._flying = True
+
+    def _handle(self, signum: int, _frame: object) -> None:
+        self.reason = self.reason or _SIGNAL_REASONS.get(signum, f"stopped by signal {signum}")
+        if not self._flying:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    @contextmanager
+    def installed(self) -> Iterator[StopRequest]:
+        """Install the handler for SIGINT and SIGTERM (main thread only), restore on exit."""
+        if threading.current_thread() is not threading.main_thread():
+            yield self
+            return
+        before = {s: signal.getsignal(s) for s in _SIGNAL_REASONS}
+        for s in _SIGNAL_REASONS:
+            signal.signal(s, self._handle)
+        try:
+            yield self
+        finally:
+            for s, h in before.items():
+                signal.signal(s, h if h is not None else signal.SIG_DFL)
+
 
 @dataclass(frozen=True)
 class RunSummary:
@@ -67,6 +137,7 @@ class RunSummary:
     t_end_s : float
         Last simulated time logged [s].
     steps : int
+        Rows logged on ``/truth/state`` (steps 0 .. steps-1).
     wall_s : float
         Wall-clock time of the loop [s].
     max_abs_dh_ft, max_abs_dvc_kts, max_abs_dphi_deg : float
@@ -147,7 +218,7 @@ def build_sensors(sc: Scenario, dt_s: float) -> SensorSuite:
 
 
 def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | None = None,
-        progress: bool | None = None) -> RunResult:
+        progress: bool | None = None, force: bool = False) -> RunResult:
     """Fly a scenario and write its MCAP log.
 
     Parameters
@@ -160,12 +231,34 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     progress : bool, optional
         Show a progress bar with the simulated-time rate; default: on for runs longer than 30 s
         of simulated time when stderr is a terminal.
+    force : bool
+        Replace an existing file at the log path even if it is not an MCAP log (never the
+        scenario file itself).
 
     Returns
     -------
     RunResult
+        ``summary.steps`` is the number of rows logged on ``/truth/state`` and ``summary.t_end_s``
+        the time of the last one, whatever the ending.
+
+    Raises
+    ------
+    RunInterrupted
+        SIGINT or SIGTERM before the flight started (during the set-up or the trim): no log is
+        written and a file already at the log path is left as it was.
+    ScenarioError, LogError
+        Bad input (an untrimmable point names the file and ``initial``); nothing is written.
+
+    Notes
+    -----
+    Stopping (SIGINT = Ctrl-C, SIGTERM = ``kill``, ``timeout``, batch schedulers): while the
+    aircraft flies, the signal only sets a flag that the loop reads at the top of each step, so
+    the run ends between two steps with every topic holding the same steps; the log is then
+    closed with status ``interrupted``. In threads other than the main one Python delivers no
+    signals, and a KeyboardInterrupt raised inside the loop still ends the run the same way.
     """
     out = Path(log_path) if log_path is not None else _default_log_path(sc, Path(out_dir))
+    check_log_path(out, sc.source, force=force)
     # one stream per component; the fault and FDI streams are spawned now so that adding faults or
     # detectors to a scenario never changes the sensor noise or the turbulence of the same seed
     seeds = np.random.SeedSequence(sc.seed)
@@ -176,65 +269,93 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
                             "json": sc.to_json(), "aircraft": sc.aircraft, "rate_hz": str(sc.model.rate_hz)},
         "versions": _versions(),
     }
-    # open the log first: an unwritable folder fails before any simulation
+    # open the log first, under a temporary name beside the final one: an unwritable folder fails
+    # before any simulation, and a run that fails to start (bad trim, bad cache folder, Ctrl-C
+    # during the trim) leaves a file already at `out` untouched. The log is moved to `out` when
+    # the flight starts.
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise LogError(str(out.parent), f"cannot create the output folder ({exc.strerror})") from None
-    writer = FlightLogWriter(out, metadata=metadata, flush_period_s=1.0)
+    starting = out.with_name(f".{out.name}.starting-{os.getpid()}")
+    stop = StopRequest()
     status, reason = "error", ""
-    t_s, k = 0.0, 0
     stats = np.zeros(3)
     tr = None
+    ch_truth = None
     wall0 = time.perf_counter()
-    try:
-        fault_defs = [registry.get("fault", tid).factory(p) for tid, p in sc.faults]
-        ac = Aircraft(sc.aircraft, sc.dt_s, icing=any(d.family == "airframe" for d in fault_defs))
-        ac.set_atmosphere(Atmosphere(), jsbsim_seed)
-        sensors = build_sensors(sc, sc.dt_s)
-        sensors.reset(np.random.default_rng(ss_sensors))
-        injector = None
-        op = sc.operating_point()
-        if fault_defs:
-            injector = FaultInjector(fault_defs, ac, sensors.names, [s.rate_hz for s in sensors.specs], TRUTH_SIGNALS,
-                                     sc.dt_s, sc.duration_s)
-            injector.reset(np.random.default_rng(ss_faults))
-            eta0 = injector.initial_icing_eta()
-            if eta0:  # iced from the start: trim with the ice on
-                ac.icing_writer()(eta0)
-                op = replace(op, icing_eta=eta0)
-            writer.add_metadata(METADATA_FAULTS, {"catalog": json.dumps(injector.catalog())})
-        tr = trim(ac, op)
-        a = sc.model.atmosphere
-        atm = Atmosphere(a.turbulence, a.wind_from_deg, a.wind_speed_kts)
-        # the trim flew in still air: the same air-relative state, now with the ground velocity of the wind
-        hold_trim_in_wind(ac, tr, atm.wind_from_deg, atm.wind_speed_kts)
-        ac.set_atmosphere(atm, jsbsim_seed)
-        pilot = build_pilot(sc, tr, sensors.names)
-        pilot.reset(np.random.default_rng(ss_pilot))
-        ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + TRUTH_SIGNALS)
-        ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
-        ch_op = writer.add_vector_channel(TOPIC_OPERATING_POINT, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
-        ch_cmd = writer.add_vector_channel(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
-        ch_meas = writer.add_vector_channel(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
-        ch_status = writer.add_event_channel(TOPIC_SIM_STATUS, "fdi_sim/msg/SimStatus", STATUS_JSON_SCHEMA)
-        ch_status.write(0.0, {"status": "running", "message": f"trimmed ({tr.method} trim), flying"})
-        fault_channels = None
-        if injector is not None:
-            fault_channels = (
-                writer.add_vector_channel(TOPIC_FAULTS, "fdi_sim/msg/FaultTruth", ("t_s",) + injector.truth_fields),
-                writer.add_event_channel(TOPIC_FAULT_EVENTS, "fdi_sim/msg/FaultEvent", FAULT_EVENT_JSON_SCHEMA),
-                writer.add_vector_channel(TOPIC_SENSORS_VALID, "fdi_sim/msg/SensorValid", ("t_s",) + sensors.names)
-                if injector.has_dropout else None,
-            )
-        status, reason, t_s, k, stats = _loop(sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress,
-                                              injector, fault_channels)
-        ch_status.write(t_s, {"status": status, "message": reason})
-    finally:
-        writer.close()
+    with stop.installed():
+        writer = FlightLogWriter(starting, metadata=metadata, flush_period_s=1.0)
+        flying = False
+        try:
+            fault_defs = [registry.get("fault", tid).factory(p) for tid, p in sc.faults]
+            ac = Aircraft(sc.aircraft, sc.dt_s, icing=any(d.family == "airframe" for d in fault_defs))
+            ac.set_atmosphere(Atmosphere(), jsbsim_seed)
+            sensors = build_sensors(sc, sc.dt_s)
+            sensors.reset(np.random.default_rng(ss_sensors))
+            injector = None
+            op = sc.operating_point()
+            if fault_defs:
+                injector = FaultInjector(fault_defs, ac, sensors.names, [s.rate_hz for s in sensors.specs],
+                                         TRUTH_SIGNALS, sc.dt_s, sc.duration_s)
+                injector.reset(np.random.default_rng(ss_faults))
+                eta0 = injector.initial_icing_eta()
+                if eta0:  # iced from the start: trim with the ice on
+                    ac.icing_writer()(eta0)
+                    op = replace(op, icing_eta=eta0)
+                writer.add_metadata(METADATA_FAULTS, {"catalog": json.dumps(injector.catalog())})
+            try:
+                tr = trim(ac, op)
+            except TrimError as exc:  # name the scenario file and the section that sets the point
+                raise ScenarioError(sc.source, "initial", str(exc),
+                                    "choose another operating point (altitude, airspeed, flaps) in [initial]") from None
+            a = sc.model.atmosphere
+            atm = Atmosphere(a.turbulence, a.wind_from_deg, a.wind_speed_kts)
+            # the trim flew in still air: the same air-relative state, now with the ground velocity of the wind
+            hold_trim_in_wind(ac, tr, atm.wind_from_deg, atm.wind_speed_kts)
+            ac.set_atmosphere(atm, jsbsim_seed)
+            pilot = build_pilot(sc, tr, sensors.names)
+            pilot.reset(np.random.default_rng(ss_pilot))
+            ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + TRUTH_SIGNALS)
+            ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
+            ch_op = writer.add_vector_channel(TOPIC_OPERATING_POINT, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
+            ch_cmd = writer.add_vector_channel(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
+            ch_meas = writer.add_vector_channel(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
+            ch_status = writer.add_event_channel(TOPIC_SIM_STATUS, "fdi_sim/msg/SimStatus", STATUS_JSON_SCHEMA)
+            ch_status.write(0.0, {"status": "running", "message": f"trimmed ({tr.method} trim), flying"})
+            fault_channels = None
+            if injector is not None:
+                fault_channels = (
+                    writer.add_vector_channel(TOPIC_FAULTS, "fdi_sim/msg/FaultTruth", ("t_s",) + injector.truth_fields),
+                    writer.add_event_channel(TOPIC_FAULT_EVENTS, "fdi_sim/msg/FaultEvent", FAULT_EVENT_JSON_SCHEMA),
+                    writer.add_vector_channel(TOPIC_SENSORS_VALID, "fdi_sim/msg/SensorValid", ("t_s",) + sensors.names)
+                    if injector.has_dropout else None,
+                )
+            # from here on a stop request only sets a flag that the loop reads once per step
+            stop.start_flight()
+            writer.move_to(out)
+            flying = True
+            status, reason, t_status_s, stats = _loop(sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas),
+                                                      progress, injector, fault_channels, stop)
+            ch_status.write(t_status_s, {"status": status, "message": reason})
+        except KeyboardInterrupt:
+            if flying:  # raised by hand inside the loop's callees: still a finished log
+                status, reason = "interrupted", stop.reason or "stopped by the user (Ctrl-C)"
+            else:
+                _discard(writer, starting)
+                raise RunInterrupted(stop.reason or "stopped by the user (Ctrl-C)", str(out)) from None
+        except BaseException:
+            if not flying:
+                _discard(writer, starting)
+            raise
+        finally:
+            if flying:
+                writer.close()
     wall = time.perf_counter() - wall0
+    t_end_s = _last_time(ch_truth)
     summary = RunSummary(
-        scenario=sc.name, aircraft=sc.aircraft, seed=sc.seed, status=status, reason=reason, t_end_s=t_s, steps=k,
+        scenario=sc.name, aircraft=sc.aircraft, seed=sc.seed, status=status, reason=reason, t_end_s=t_end_s,
+        steps=ch_truth.rows_written if ch_truth is not None else 0,
         wall_s=wall, max_abs_dh_ft=float(stats[0]), max_abs_dvc_kts=float(stats[1]), max_abs_dphi_deg=float(stats[2]),
         trim_throttle_norm=tr.throttle_cmd_norm if tr else math.nan,
         trim_alpha_deg=tr.alpha_rad * DEG_PER_RAD if tr else math.nan,
@@ -242,9 +363,58 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     return RunResult(log_path=out, status=status, summary=summary)
 
 
+def _last_time(ch) -> float:
+    t = ch.last_t_s if ch is not None else None
+    return 0.0 if t is None else t
+
+
+def _discard(writer: FlightLogWriter, starting: Path) -> None:
+    """Drop the log of a run that never flew (the temporary file; nothing at the final path)."""
+    writer.abort()
+    starting.unlink(missing_ok=True)
+
+
+def check_log_path(out: Path, scenario_source: str, *, force: bool = False) -> None:
+    """Refuse a log path that would destroy something that is not a flight log.
+
+    Parameters
+    ----------
+    out : Path
+        The log file to be written.
+    scenario_source : str
+        The scenario file (never overwritten, even with ``force``).
+    force : bool
+        Allow replacing an existing file that is not an MCAP log.
+
+    Raises
+    ------
+    LogError
+        ``out`` is the scenario file, a folder, or an existing file that is not MCAP (without
+        ``force``).
+    """
+    if not out.exists() and not out.is_symlink():
+        return
+    if out.is_dir():
+        raise LogError(str(out), "the log path is a folder; give a file name ending in .mcap (--log) or the folder as --out")
+    src = Path(scenario_source)
+    if src.exists() and out.exists() and os.path.samefile(out, src):
+        raise LogError(str(out), "the log path is the scenario file itself; give another --log path")
+    if force:
+        return
+    try:
+        with open(out, "rb") as f:
+            head = f.read(len(MCAP_MAGIC))
+    except OSError as exc:
+        raise LogError(str(out), f"an existing file is in the way and cannot be read ({exc.strerror}); "
+                       "choose another --log path") from None
+    if head != MCAP_MAGIC:
+        raise LogError(str(out), "an existing file that is not an MCAP log is in the way; choose another --log "
+                       "path, or pass --force (Python: force=True) to replace it")
+
+
 def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channels: tuple, progress: bool | None,
-          inj: FaultInjector | None = None, fault_channels: tuple | None = None):
-    """The per-step loop; returns (status, reason, last t_s, steps, max deviations)."""
+          inj: FaultInjector | None, fault_channels: tuple | None, stop: StopRequest):
+    """The per-step loop; returns (status, reason, time of the status [s], max deviations)."""
     ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
     ch_ftruth, ch_fevents, ch_valid = fault_channels if fault_channels else (None, None, None)
     # Python floats end to end: lists in, struct-packed rows out (no numpy call per step)
@@ -275,6 +445,10 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     last_shown = 0
     try:
         for k in range(n_steps + 1):
+            if stop.requested:  # between two steps: every topic holds steps 0 .. k-1
+                status, reason = "interrupted", stop.reason
+                t_s = (k - 1) * dt if k else 0.0
+                break
             t_s = k * dt
             xl = read_truth()
             # --- divergence checks on the truth (NaN, ground, departure) -------------------------
@@ -336,12 +510,12 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 last_shown = k
     except SimulationDiverged as exc:
         status, reason, t_s = "diverged", exc.reason, exc.t_s
-    except KeyboardInterrupt:  # end cleanly: the caller still gets a summary and a finished log
-        status, reason = "interrupted", "stopped by the user (Ctrl-C)"
+    except KeyboardInterrupt:  # raised inside a callee (no handler installed): end cleanly all the same
+        status, reason = "interrupted", stop.reason or "stopped by the user (Ctrl-C)"
     finally:
         if bar is not None:
             bar.close()
-    return status, reason, t_s, k, np.array([max_dh, max_dv, max_dphi])
+    return status, reason, t_s, np.array([max_dh, max_dv, max_dphi])
 
 
 def _progress_bar(sc: Scenario, progress: bool | None):
