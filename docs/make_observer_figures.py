@@ -107,6 +107,7 @@ SIDAR_READINGS_1 = [
     ("every entry of A0, B0 adapts (M, N all m, n)", SidarReading(full_matrices=True)),
     ("normalized law (/ 1 + |x_hat|^2 + |u|^2)", SidarReading(normalized=True)),
     ("eq. 23 every 0.05 s, plant + observer continuous in between", SidarReading(law="sampled")),
+    ("... update applied one step late (the module before issue 12)", SidarReading(law="sampled", update="next_sample")),
     ("eq. 23, plant and observer forward Euler at 0.05 s", SidarReading(law="euler")),
     ("eq. 23, observer Euler on samples, plant exact (biased)", SidarReading(law="euler_observer")),
     ("x_hat2(0) = 0 instead of 1", SidarReading(x_hat0=(0.8, 0.0))),
@@ -165,7 +166,7 @@ def sidar_readings() -> dict[str, list[str]]:
         out["ex2"].append(f"| {label} | {_bars_text(b8, 0)} | {_bars_text(b8, 1)} | {_bars_text(b9, 0)} | {_bars_text(b9, 1)} "
                           f"| {ok8[2:].sum()} / {ok9[2:].sum()} / {(ok8 & ok9)[2:].sum()} |")
     # example 2 with a gain per parameter (a, b, c): which gains can meet fig. 8 at all
-    gv = np.geomspace(1.0, 3e3, 10)
+    gv = 10.0 ** (0.1 + 0.2 * np.arange(17))  # 1.26 .. 2512 /s, 0.2 decade, holds 50.1 and 794
     g3 = np.array([(ga, gb, gc) for ga in gv for gb in gv for gc in gv])
     for label, rd in (("literal (continuous)", SidarReading()), ("sampled (eq. 23 every 0.05 s)", SidarReading(law="sampled"))):
         b8 = sidar_bars(simulate_sidar(2, g3 * _sidar_scale(rd), False, rd, 12.0))
@@ -189,10 +190,12 @@ def fig_sidar() -> None:
                                               ("x_hat2(0)=0, 200, 100 /s", (200, 100), SidarReading(x_hat0=(0.8, 0.0)), "--")]),
         ("observer_sidar_fig8.png", 2, False, [("literal, unity /s", (1, 1, 1), SidarReading(), ":"),
                                                ("literal, per step: 20 /s", (20, 20, 20), SidarReading(), "-"),
-                                               ("tuned: a 35, b 35, c 1232 /s", (35.11, 35.11, 1232.5), SidarReading(), "--")]),
+                                               ("tuned: a 50, b 794, c 794 /s", (50.12, 794.3, 794.3), SidarReading(), "--"),
+                                               ("unequal: a 1000, b 1000, c 100 /s", (1000, 1000, 100), SidarReading(), "-.")]),
         ("observer_sidar_fig9.png", 2, True, [("literal, unity /s", (1, 1, 1), SidarReading(), ":"),
                                               ("literal, per step: 20 /s", (20, 20, 20), SidarReading(), "-"),
-                                              ("starts matched, 400 /s", (400, 400, 400), SidarReading(start_matched=True), "--")]),
+                                              ("starts matched, 400 /s", (400, 400, 400), SidarReading(start_matched=True), "--"),
+                                              ("unequal: a 1000, b 1000, c 100 /s", (1000, 1000, 100), SidarReading(), "-.")]),
     ]
     for fname, ex, tracking, runs in cases:
         q = ex + 1

@@ -4,7 +4,8 @@ A full-order observer ``dxh/dt = A0 xh + B0 u + K eps``, ``eps = y - C xh - D u`
 matrices adapt by
 
 * continuous (eq. 22):  ``dA0/dt = M eps xh'``,  ``dB0/dt = N eps u'``
-* discrete (eq. 23):    ``A0(k+1) = A0(k) + M eps(k) xh(k)'``,  ``B0(k+1) = B0(k) + N eps(k) u(k)'``
+* discrete (eq. 23):    ``A0(k) = A0(k-1) + M eps(k) xh(k)'``,  ``B0(k) = B0(k-1) + N eps(k) u(k)'``,
+  applied at the sample it is computed from: ``xh(k+1) = A0(k) xh(k) + B0(k) u(k) + K eps(k)``
 
 so that the observer stays matched to a drifting plant (sec. III: a mismatch makes the residual
 coloured and biased and ruins the false-alarm rate) and its parameter estimates become a
@@ -19,7 +20,9 @@ Gains: Sidar's conditions (eq. 34, proved in his Appendix) are checked on
 whole box. Note the conditions concern eq. 24, which substitutes the update for the mismatch; they
 are Sidar's heuristic argument, not a convergence proof of the parameter estimates.
 
-Continuous models are integrated between samples by RK4 with ``y`` interpolated linearly and ``u``
+A state that stops being finite (the unnormalized law diverges when ``gain * |regressor|^2`` is
+too large) marks every later ``Residual`` invalid (``valid=False``, no alarm) until ``reset``;
+``diverged_t_s`` says when. Continuous models are integrated between samples by RK4 with ``y`` interpolated linearly and ``u``
 held (``input_hold="zoh"``) or interpolated (``"foh"``); discrete models use eq. 23 directly.
 Sidar's sec. VI examples and the readings study are in :mod:`fdi_sim.papers.sidar_examples`.
 """
@@ -32,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.decision.chi2 import chi2_threshold
-from fdi_sim.detectors.base import Residual
+from fdi_sim.detectors.base import Residual, finite_or_invalid
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 
@@ -330,6 +333,8 @@ class AdaptiveObserver:
         self.x_hat = self._x0.copy()
         self._prev: tuple[float, Array, Array] | None = None
         self._t = 0.0
+        #: time [s] of the first sample at which the state or matrices were not finite, or None
+        self.diverged_t_s: float | None = None
 
     # -- continuous-time right-hand side: z = [xh, A0 (masked entries), B0 (masked entries)]
     def _rhs(self, xh: Array, A0: Array, B0: Array, u: Array, y: Array) -> tuple[Array, Array, Array]:
@@ -361,24 +366,33 @@ class AdaptiveObserver:
         """One sample: time [s], absolute ``u`` and ``y``; returns the output error and parameter scores."""
         du = np.asarray(u, float) - self._u0
         dy = np.asarray(y, float) - self._y0
-        if self.model.is_discrete:
-            eps = dy - self._C @ self.x_hat - self._D @ du
-            xh = self.x_hat
-            self.x_hat = self.A0 @ xh + self.B0 @ du + self.K @ eps  # eq. 2, discrete
-            # eq. 23 on the adapted entries only: A0[i, j] += (M eps)_i xh_j, B0[i, j] += (N eps)_i u_j
-            self.A0.flat[self._iA] += (self.M @ eps)[self._rowA] * xh[self._colA]
-            self.B0.flat[self._iB] += (self.N @ eps)[self._rowB] * du[self._colB]
-        else:
-            if self._prev is not None:
-                self._integrate(*self._prev, t_s, du, dy)
-            self._prev = (float(t_s), du, dy)
-            eps = dy - self._C @ self.x_hat - self._D @ du
         self._t = float(t_s)
-        stat = float(eps @ self._Sinv @ eps)
-        scores = self._relative_change()
+        if self.diverged_t_s is not None:  # NaN from here on; skip the arithmetic (and its overflow warnings)
+            nan = np.full(self._C.shape[0], np.nan)
+            return Residual(float(t_s), nan, np.nan, self._dof, self.threshold, False, None,
+                            np.full(len(self.hypotheses), np.nan), valid=False)
+        with np.errstate(over="ignore", invalid="ignore"):  # a divergence is reported below, not warned
+            if self.model.is_discrete:
+                eps = dy - self._C @ self.x_hat - self._D @ du
+                xh = self.x_hat
+                # eq. 23 at its own sample, adapted entries only: A0[i, j] += (M eps)_i xh_j, B0[i, j] += (N eps)_i u_j
+                self.A0.flat[self._iA] += (self.M @ eps)[self._rowA] * xh[self._colA]
+                self.B0.flat[self._iB] += (self.N @ eps)[self._rowB] * du[self._colB]
+                self.x_hat = self.A0 @ xh + self.B0 @ du + self.K @ eps  # eq. 2, discrete, with A0(k), B0(k)
+            else:
+                if self._prev is not None:
+                    self._integrate(*self._prev, t_s, du, dy)
+                self._prev = (float(t_s), du, dy)
+                eps = dy - self._C @ self.x_hat - self._D @ du
+            stat = float(eps @ self._Sinv @ eps)
+            scores = self._relative_change()
+        if not (np.isfinite(self.x_hat).all() and np.isfinite(self.A0).all() and np.isfinite(self.B0).all()):
+            self.diverged_t_s = float(t_s)
+            scores = np.full(len(self.hypotheses), np.nan)
+            return Residual(float(t_s), eps, stat, self._dof, self.threshold, False, None, scores, valid=False)
         alarm = stat > self.threshold
         iso = self.hypotheses[int(np.argmax(np.abs(scores)))] if alarm and scores.size else None
-        return Residual(float(t_s), eps, stat, self._dof, self.threshold, alarm, iso, scores)
+        return finite_or_invalid(Residual(float(t_s), eps, stat, self._dof, self.threshold, alarm, iso, scores))
 
     def _relative_change(self) -> Array:
         cur = np.concatenate([self.A0.ravel()[self._iA] - self._eye_A, self.B0.ravel()[self._iB]])

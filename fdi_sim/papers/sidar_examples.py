@@ -58,6 +58,11 @@ class SidarReading:
         Example 2: adapt c (else held at its true value).
     step_s : float
         Step of the discrete laws [s].
+    update : {"own_sample", "next_sample"}
+        When a discrete law applies the eq. 23 update computed from the samples at ``t_k``:
+        ``"own_sample"`` (eq. 23 read as ``A0(k) = A0(k-1) + M eps(k) xh(k)'``, used over
+        ``[t_k, t_k+1]``) or ``"next_sample"`` (held until ``t_k+1``, one step late: the
+        module's law before issue 12; it gives the old sampled row, 0.141 / 297 % on fig. 6).
     """
 
     law: Literal["continuous", "sampled", "euler", "euler_observer"] = "continuous"
@@ -71,6 +76,7 @@ class SidarReading:
     start_matched: bool = False
     adapt_c: bool = True
     step_s: float = SIDAR_STEP_S
+    update: Literal["own_sample", "next_sample"] = "own_sample"
 
 
 @dataclass(frozen=True)
@@ -261,6 +267,8 @@ def simulate_sidar(
                  "euler": (rd.step_s, 1), "euler_observer": (rd.step_s, max(1, round(rd.step_s / h_s)))}
     if rd.law not in law_steps:
         raise DesignError(f"unknown law {rd.law!r}: one of {sorted(law_steps)}")
+    if rd.update not in ("own_sample", "next_sample"):
+        raise DesignError(f"unknown update {rd.update!r}: 'own_sample' or 'next_sample'")
     T, sub = law_steps[rd.law]
     every = max(1, round(record_dt_s / T)) if rd.law == "continuous" else 1
     for k in range(int(round(t_end_s / T)) + 1):
@@ -274,7 +282,9 @@ def simulate_sidar(
         if rd.law == "continuous":
             x, xh, A0, B0 = _rk4(full, t, (x, xh, A0, B0), T)
         else:
-            dA, dB = adapt(t, x, xh)  # eq. 23 from the samples at t_k, applied after the step
+            dA, dB = adapt(t, x, xh)  # eq. 23 from the samples at t_k
+            if rd.update == "own_sample":  # A0(k) = A0(k-1) + M eps(k) xh(k)', flown over [t_k, t_k+1]
+                A0, B0 = A0 + dA, B0 + dB
             h = T / sub
             if rd.law == "sampled":  # plant and observer together, A0, B0 held over the step
                 for j in range(sub):
@@ -286,7 +296,8 @@ def simulate_sidar(
                 else:  # euler_observer: the plant exact
                     for j in range(sub):
                         (x,) = _rk4(lambda tt, z: (plant(tt, z[0]),), t + j * h, (x,), h)
-            A0, B0 = A0 + dA, B0 + dB
+            if rd.update == "next_sample":  # held over the step, applied at t_k+1
+                A0, B0 = A0 + dA, B0 + dB
         with np.errstate(invalid="ignore"):
             bad = ~(np.abs(A0).max(axis=(1, 2)) <= 1e4)  # diverged (or NaN): frozen at NaN
         A0[bad], B0[bad], xh[bad] = np.nan, np.nan, np.nan

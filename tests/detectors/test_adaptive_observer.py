@@ -67,7 +67,8 @@ def test_discrete_law_eq_23_by_hand() -> None:
     est = obs.estimates()
     assert np.isclose(est.A[0, 0], 0.5 + 0.5 * -1.0 * 2.0)  # A0 += M eps xh'
     assert np.isclose(est.B[0, 0], 1.0 + 0.25 * -1.0 * 3.0)  # B0 += N eps u'
-    assert np.isclose(obs.x_hat[0], 0.5 * 2.0 + 1.0 * 3.0 + 0.2 * -1.0)
+    # eq. 23 applied at its own sample: x_hat(1) = A0(0) xh(0) + B0(0) u(0) + K eps(0) with the updated A0, B0
+    assert np.isclose(obs.x_hat[0], (0.5 - 1.0) * 2.0 + (1.0 - 0.75) * 3.0 + 0.2 * -1.0)
     # masked: only the adapted entries move, each by eq. 23 (full matrices M eps xh', N eps u', masked by hand)
     A2, B2, M, N = np.array([[0.9, 0.1], [0.0, 0.8]]), np.array([[0.0], [0.5]]), np.array([[0.3, 0.0], [0.1, 0.2]]), np.eye(2)
     mask_A, mask_B = np.array([[True, False], [True, True]]), np.array([[False], [True]])
