@@ -30,7 +30,7 @@ from fdi_sim.aircraft import (
     COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, TrimResult, hold_trim_in_wind, trim,
 )
 from fdi_sim.aircraft.model import wind_ned_fps
-from fdi_sim.errors import LogError, ScenarioError, SimulationDiverged, TrimError
+from fdi_sim.errors import LogError, SimulationDiverged, TrimError
 from fdi_sim.faults.injector import FaultInjector
 from fdi_sim.flightlog import (
     FAULT_EVENT_JSON_SCHEMA,
@@ -307,8 +307,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             try:
                 tr = trim(ac, op)
             except TrimError as exc:  # name the scenario file and the section that sets the point
-                raise ScenarioError(sc.source, "initial", str(exc),
-                                    "choose another operating point (altitude, airspeed, flaps) in [initial]") from None
+                raise exc.with_source(sc.source, "initial") from None
             a = sc.model.atmosphere
             atm = Atmosphere(a.turbulence, a.wind_from_deg, a.wind_speed_kts)
             # the trim flew in still air: the same air-relative state, now with the ground velocity of the wind

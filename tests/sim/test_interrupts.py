@@ -153,12 +153,12 @@ def test_failed_start_leaves_the_old_log(tmp_path: Path) -> None:
     old = _good_log(tmp_path)
     log = tmp_path / "keep.mcap"
     scn = tmp_path / "bad.toml"
-    scn.write_text(LONG_SCENARIO.replace("vc_kts = 120.0", "vc_kts = 40.0"))
+    scn.write_text(LONG_SCENARIO.replace("vc_kts = 120.0", "vc_kts = 50.0"))
     r = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "run", str(scn), "--log", str(log), "--quiet"],
                        capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 2, r.stderr
     assert "Traceback" not in r.stderr
-    assert str(scn) in r.stderr and "initial" in r.stderr, r.stderr
+    assert f"{scn}: initial: cannot trim" in r.stderr and "Fix:" in r.stderr, r.stderr
     assert log.read_bytes() == old
     assert not [p for p in tmp_path.iterdir() if ".starting-" in p.name]
 
