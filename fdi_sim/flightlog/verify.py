@@ -1,0 +1,754 @@
+"""Check a flight log's integrity: every CRC of the MCAP specification, and every index
+against what it indexes (``fdi-sim verify LOG``).
+
+What is checked (MCAP specification, https://mcap.dev/spec):
+
+- the magic at both ends; the Header is the first record; every record parses strictly
+  (:func:`fdi_sim.flightlog.framing.parse_body`);
+- every chunk: decompressed (zstd, lz4 or none), its uncompressed size and CRC, its records
+  fill it exactly, its message start / end times are those of its messages;
+- the Data End record's ``data_section_crc``: CRC32 of every byte from the opening magic to the
+  Data End record; the footer's ``summary_crc``: CRC32 from the summary start through the
+  footer's ``summary_offset_start`` field. The ``mcap`` readers skip both;
+- message indexes hold exactly the (log time, offset) of every message of their channel in
+  the chunk before them; chunk indexes agree with their chunk (position, length, times,
+  compression, sizes, message index positions and length); metadata indexes point at a
+  metadata record of their name and length; statistics equal the counts of the data section;
+  the summary's schemas and channels equal the data section's copies byte for byte; summary
+  offsets describe the summary's groups; the footer points at the summary and its offsets.
+
+Every byte of a file written by :class:`~fdi_sim.flightlog.FlightLogWriter` is covered: the
+data section CRC covers the magic and every data record, the summary CRC every summary record
+and the footer's fields, and the summary CRC field and the closing magic are compared
+themselves. When a CRC fails, :func:`~fdi_sim.flightlog.framing.locate_single_byte_error`
+finds the byte a single change would explain and the report names the record holding it.
+"""
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.opcode import Opcode
+
+from fdi_sim.errors import LogError
+from fdi_sim.flightlog.framing import (
+    DATA_OPCODES,
+    SUMMARY_OPCODES,
+    Gap,
+    Span,
+    decompress,
+    locate_single_byte_error,
+    opcode_name,
+    parse_body,
+    scan_section,
+)
+from fdi_sim.flightlog.records import FOOTER_RECORD_BYTES, MCAP_MAGIC, RECORD_HEAD_BYTES, scan_records
+from fdi_sim.units import NS_PER_S
+
+#: Data End record: opcode, length, data_section_crc u32
+_DATA_END_BYTES = RECORD_HEAD_BYTES + 4
+#: topics named in a chunk's part name before "+N more"
+_TOPICS_SHOWN = 4
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong in a log.
+
+    Attributes
+    ----------
+    part : str
+        The damaged part: ``"header"``, ``"chunk at offset N (topics, t_s a..b s)"``,
+        ``"message index at offset N (...)"``, ``"metadata record 'scenario'"``,
+        ``"channel record 3 (/truth/state) in the data section"``, ``"statistics"``,
+        ``"chunk index of the chunk at offset N"``, ``"metadata index 'scenario'"``,
+        ``"summary offset record (CHANNEL group)"``, ``"data section (Data End CRC)"``,
+        ``"summary section (summary CRC)"``, ``"footer"``, ...
+    what : str
+        What is wrong.
+    offset : int or None
+        File offset of the damage or of the damaged record [bytes].
+    """
+
+    part: str
+    what: str
+    offset: int | None = None
+
+    def format(self) -> str:
+        """``part: what``."""
+        return f"{self.part}: {self.what}"
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    """The result of :func:`verify_log`.
+
+    Attributes
+    ----------
+    path : Path
+    size_bytes : int
+    problems : tuple of Problem
+        Empty for an intact log.
+    checks : tuple of str
+        What was verified (CRCs, indexes), for the terminal.
+    """
+
+    path: Path
+    size_bytes: int
+    problems: tuple[Problem, ...]
+    checks: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        """No problem found."""
+        return not self.problems
+
+    def parts(self) -> tuple[str, ...]:
+        """The damaged parts, each once, in report order."""
+        return tuple(dict.fromkeys(p.part for p in self.problems))
+
+    def format(self) -> str:
+        """A terminal report (what ``fdi-sim verify LOG`` prints)."""
+        head = f"{self.path}  ({self.size_bytes} bytes): " + (
+            "intact" if self.ok else f"DAMAGED, {len(self.problems)} problems")
+        lines = [head, "checked: " + "; ".join(self.checks)]
+        lines += [f"  {p.format()}" for p in self.problems]
+        if not self.ok:
+            lines.append(f"rebuild what is intact with `fdi-sim repair {self.path}`")
+        return "\n".join(lines)
+
+
+def looks_like_mcap(data: bytes) -> bool:
+    """The file opens or ends with the MCAP magic, or opens with it but for one byte."""
+    n = len(MCAP_MAGIC)
+    if len(data) < n:
+        return MCAP_MAGIC.startswith(data) and len(data) > 0
+    head_diff = sum(a != b for a, b in zip(data[:n], MCAP_MAGIC))
+    return head_diff <= 1 or (len(data) >= 2 * n and data[-n:] == MCAP_MAGIC)
+
+
+def verify_log(path: str | Path) -> VerifyReport:
+    """Check every CRC and every index of a flight log (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        An MCAP file.
+
+    Returns
+    -------
+    VerifyReport
+        ``.ok`` False and ``.problems`` naming each damaged part for a damaged or cut-off file.
+
+    Raises
+    ------
+    LogError
+        The file cannot be read, or is not an MCAP file at all (neither end holds the magic).
+    """
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise LogError(str(path), f"cannot read the flight log ({exc.strerror})") from None
+    if not looks_like_mcap(data):
+        raise LogError(str(p), "not an MCAP file (neither end holds the MCAP magic bytes); "
+                       "pass a flight log written by `fdi-sim run`")
+    v = _Verifier(data)
+    v.run()
+    return VerifyReport(p, len(data), tuple(v.problems), tuple(v.checks))
+
+
+@dataclass
+class _Chunk:
+    span: Span
+    records: bytes | None = None
+    messages: dict[int, np.ndarray] = field(default_factory=dict)  # cid -> (n, 2) log, offset
+    indexes: list[Span] = field(default_factory=list)  # the Message Index records after it
+
+
+class _Verifier:
+    """The state of one check; ``run`` fills ``problems`` and ``checks``."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        self.problems: list[Problem] = []
+        self.checks: list[str] = []
+        self.topics: dict[int, str] = {}
+        self.schema_names: dict[int, str] = {}
+        self.meta_names: dict[int, str] = {}  # metadata record offset -> name
+        self.sum_spans: list[Span] = []
+        self.sum_gaps: list[Gap] = []
+        self.groups: list[tuple[int, int, int]] = []
+        self._expected: list[tuple[int, int, str]] = []
+        self.data_crc: tuple[int, int] | None = None  # (stored, computed)
+        self.summary_crc: tuple[int, int] | None = None
+        self.parts: list[tuple[int, int, str]] = []  # (start, end, part) for CRC location
+        self.data_crc_ok: bool | None = None
+        self.summary_crc_ok: bool | None = None
+
+    def add(self, part: str, what: str, offset: int | None = None) -> None:
+        self.problems.append(Problem(part, what, offset))
+
+    # -- layout ----------------------------------------------------------------------------
+    def run(self) -> None:
+        d = self.data
+        n = len(d)
+        if d[:len(MCAP_MAGIC)] != MCAP_MAGIC:
+            self.add("header (leading magic)", f"the first 8 bytes are {d[:8]!r}, not the MCAP magic", 0)
+        footer_pos = n - len(MCAP_MAGIC) - FOOTER_RECORD_BYTES
+        tail_ok = n >= 2 * len(MCAP_MAGIC) + FOOTER_RECORD_BYTES and d[-len(MCAP_MAGIC):] == MCAP_MAGIC
+        footer_like = footer_pos > len(MCAP_MAGIC) and d[footer_pos] == Opcode.FOOTER
+        complete = tail_ok or footer_like or self._data_end_at(footer_pos - _DATA_END_BYTES) is not None
+        data_end = self._find_data_end(footer_pos) if complete else None
+        if not complete or data_end is None:
+            self._check_data_section(len(MCAP_MAGIC), n, cut_off=True)
+            self.add("footer", f"missing: the file ends at byte {n} without Data End, summary and "
+                     "footer (cut off by a crash, or never closed)", n)
+            return
+        if not tail_ok:
+            self.add("footer (closing magic)", f"the last 8 bytes are {d[-8:]!r}, not the MCAP magic", n - 8)
+        self.parts.append((footer_pos, n, "footer"))
+        self._scan_summary(data_end + _DATA_END_BYTES, footer_pos)
+        self._crcs(data_end, footer_pos)
+        self._check_data_section(len(MCAP_MAGIC), data_end, cut_off=False)
+        self._check_data_crc(data_end)
+        self._check_summary(data_end + _DATA_END_BYTES, footer_pos)
+        self._cross_checks()
+
+    def _data_end_at(self, pos: int) -> int | None:
+        if pos < len(MCAP_MAGIC) or pos + _DATA_END_BYTES > len(self.data):
+            return None
+        ok = self.data[pos] == Opcode.DATA_END and self.data[pos + 1:pos + 9] == (4).to_bytes(8, "little")
+        return pos if ok else None
+
+    def _find_data_end(self, footer_pos: int) -> int | None:
+        """The Data End record: where the footer's summary_start says, else the last record
+        with Data End's opcode and length 4 that a summary record or the footer follows."""
+        d = self.data
+        try:
+            foot = parse_body(Opcode.FOOTER, d[footer_pos + RECORD_HEAD_BYTES:footer_pos + FOOTER_RECORD_BYTES])
+            at = self._data_end_at(foot.summary_start - _DATA_END_BYTES)
+            if at is not None:
+                return at
+        except ValueError:
+            pass
+        pattern = bytes([Opcode.DATA_END]) + (4).to_bytes(8, "little")
+        pos = d.rfind(pattern, 0, footer_pos)
+        while pos >= len(MCAP_MAGIC):
+            nxt = pos + _DATA_END_BYTES
+            if nxt == footer_pos or d[nxt] in SUMMARY_OPCODES:
+                return pos
+            pos = d.rfind(pattern, 0, pos)
+        # the Data End record itself is damaged: the summary starts at the footer's word
+        # if that is plausible, else there is no telling where the data section ends
+        try:
+            start = foot.summary_start
+            if len(MCAP_MAGIC) + _DATA_END_BYTES <= start <= footer_pos:
+                self.add("data section (Data End record)", f"no Data End record before the summary at offset {start}",
+                         start - _DATA_END_BYTES)
+                return start - _DATA_END_BYTES
+        except UnboundLocalError:
+            pass
+        return None
+
+    # -- data section ------------------------------------------------------------------------
+    def _check_data_section(self, start: int, end: int, *, cut_off: bool) -> None:
+        d = self.data
+        spans, gaps, stop = scan_section(d, start, end, DATA_OPCODES, first=Opcode.HEADER, cut_off_ok=cut_off)
+        if cut_off and stop < end:
+            self.add("data section", f"cut off inside a record at offset {stop}", stop)
+        self.data_spans, self.data_gaps = spans, gaps
+        self._names()
+        self.schemas_d: dict[int, Span] = {}
+        self.channels_d: dict[int, Span] = {}
+        self.metadata_d: list[Span] = []
+        self.chunks: list[_Chunk] = []
+        self.loose: dict[int, list[int]] = {}
+        if not spans or spans[0].opcode != Opcode.HEADER or spans[0].start != start:
+            self.add("header", f"the first record (offset {start}) is not a readable Header record", start)
+            self.parts.append((0, spans[0].start if spans else end, "header"))
+        else:
+            self.parts.append((0, spans[0].end, "header"))
+            if spans[0].record is None:
+                self.add("header", f"does not parse ({spans[0].error})", start)
+        chunk: _Chunk | None = None
+        for s in spans[1:] if spans and spans[0].opcode == Opcode.HEADER else spans:
+            if s.opcode != Opcode.MESSAGE_INDEX:
+                chunk = None
+            if s.opcode == Opcode.HEADER:
+                self.add("header", f"a second Header record at offset {s.start}", s.start)
+            elif s.opcode == Opcode.SCHEMA:
+                self._copy(self.schemas_d, s, "data section")
+            elif s.opcode == Opcode.CHANNEL:
+                self._copy(self.channels_d, s, "data section")
+            elif s.opcode == Opcode.METADATA:
+                self.metadata_d.append(s)
+                self.parts.append((s.start, s.end, self._metadata_part(s)))
+                if s.record is None:
+                    self.add(self._metadata_part(s), f"does not parse ({s.error})", s.start)
+            elif s.opcode == Opcode.CHUNK:
+                chunk = self._chunk(s)
+                self.chunks.append(chunk)
+            elif s.opcode == Opcode.MESSAGE_INDEX:
+                self._message_index(s, chunk)
+            elif s.opcode == Opcode.MESSAGE:
+                self.parts.append((s.start, s.end, f"message record at offset {s.start}"))
+                if s.record is not None:
+                    self.loose.setdefault(s.record.channel_id, []).append(s.record.log_time)
+            elif s.opcode == Opcode.DATA_END:
+                self.add("data section (Data End record)", f"a Data End record at offset {s.start} "
+                         "before the end of the data section", s.start)
+            else:
+                self.parts.append((s.start, s.end, f"{opcode_name(s.opcode)} record at offset {s.start}"))
+            if s.reframed:
+                self.add(self._part_of(s), "the record's opcode or length field is damaged (its body "
+                         "reads as this record between two intact ones)", s.start)
+        for g in gaps:
+            self._gap(g, "data section")
+        self.checks.append(f"{len(self.chunks)} chunk CRCs")
+
+    def _crcs(self, data_end: int, footer_pos: int) -> None:
+        """The stored and computed data section and summary CRCs (0 stored: not recorded)."""
+        d = self.data
+        (stored,) = struct.unpack_from("<I", d, data_end + RECORD_HEAD_BYTES)
+        if stored:
+            self.data_crc = (stored, zlib.crc32(memoryview(d)[:data_end]))
+            self.data_crc_ok = self.data_crc[0] == self.data_crc[1]
+        (stored,) = struct.unpack_from("<I", d, footer_pos + RECORD_HEAD_BYTES + 16)
+        if stored:
+            covered = footer_pos + RECORD_HEAD_BYTES + 16  # through summary_offset_start
+            self.summary_crc = (stored, zlib.crc32(memoryview(d)[data_end + _DATA_END_BYTES:covered]))
+            self.summary_crc_ok = self.summary_crc[0] == self.summary_crc[1]
+
+    def _names(self) -> None:
+        """Topic, schema and metadata names for the report, from the copy most likely intact:
+        a section whose CRC holds first, then one without a CRC, then a damaged one."""
+        rank = {True: 0, None: 1, False: 2}
+        sources = sorted([(rank[self.data_crc_ok], 0, self.data_spans), (rank[self.summary_crc_ok], 1, self.sum_spans)],
+                         key=lambda x: x[:2])
+        meta_data = {s.start: s.record.name for s in self.data_spans
+                     if s.opcode == Opcode.METADATA and s.record is not None}
+        meta_index = {s.record.offset: s.record.name for s in self.sum_spans
+                      if s.opcode == Opcode.METADATA_INDEX and s.record is not None}
+        for _, which, spans in sources:
+            for s in spans:
+                if s.record is None or s.reframed:
+                    continue
+                if s.opcode == Opcode.CHANNEL:
+                    self.topics.setdefault(s.record.id, s.record.topic)
+                elif s.opcode == Opcode.SCHEMA:
+                    self.schema_names.setdefault(s.record.id, s.record.name)
+            for off, name in (meta_data if which == 0 else meta_index).items():
+                self.meta_names.setdefault(off, name)
+
+    def _copy(self, table: dict[int, Span], s: Span, section: str) -> None:
+        part = self._part_of(s, section)
+        self.parts.append((s.start, s.end, part))
+        if s.record is None:
+            self.add(part, f"does not parse ({s.error})", s.start)
+            return
+        if s.record.id in table and bytes(self._body(table[s.record.id])) != bytes(self._body(s)):
+            self.add(part, f"two different records with id {s.record.id} in the {section}", s.start)
+        table.setdefault(s.record.id, s)
+
+    def _body(self, s: Span) -> memoryview:
+        return memoryview(self.data)[s.start + RECORD_HEAD_BYTES:s.end]
+
+    def _part_of(self, s: Span, section: str = "data section") -> str:
+        """The part name of a record (by its opcode, id and name)."""
+        rec = s.record
+        rid = rec.id if rec is not None and hasattr(rec, "id") else int.from_bytes(
+            self.data[s.start + 9:s.start + 11], "little")
+        if s.opcode == Opcode.SCHEMA:
+            return f"schema record {rid} ({self.schema_names.get(rid, '?')}) in the {section}"
+        if s.opcode == Opcode.CHANNEL:
+            return f"channel record {rid} ({self.topics.get(rid, '?')}) in the {section}"
+        if s.opcode == Opcode.METADATA:
+            return self._metadata_part(s)
+        if s.opcode == Opcode.CHUNK:
+            return self._chunk_part(s, None)
+        return f"{opcode_name(s.opcode)} record at offset {s.start}"
+
+    def _metadata_part(self, s: Span) -> str:
+        name = self.meta_names.get(s.start)
+        return f"metadata record '{name}'" if name is not None else f"metadata record at offset {s.start}"
+
+    def _chunk_part(self, s: Span, cids: Any) -> str:
+        head = s.record
+        if cids is None:
+            cids = []
+        topics = [self.topics.get(c, f"channel {c}") for c in sorted(cids)]
+        shown = ", ".join(topics[:_TOPICS_SHOWN]) + (f" +{len(topics) - _TOPICS_SHOWN} more"
+                                                     if len(topics) > _TOPICS_SHOWN else "")
+        span = (f"t_s {head.message_start_time / NS_PER_S:.3f}..{head.message_end_time / NS_PER_S:.3f}"
+                if head is not None else "times unreadable")
+        return f"chunk at offset {s.start} ({shown or 'channels unknown'}, {span})"
+
+    def _chunk(self, s: Span) -> _Chunk:
+        c = _Chunk(s)
+        if s.record is None:
+            part = self._chunk_part(s, None)
+            self.add(part, f"does not parse ({s.error})", s.start)
+            self.parts.append((s.start, s.end, part))
+            c.part = part  # type: ignore[attr-defined]
+            return c
+        head = s.record
+        problem = ""
+        try:
+            c.records = decompress(self.data, head)
+        except ValueError as exc:
+            problem = str(exc)
+        if c.records is not None:
+            found: dict[int, list[tuple[int, int]]] = {}
+            end = 0
+            for opcode, body, length in scan_records(c.records):
+                end = body + length
+                if opcode == Opcode.MESSAGE:
+                    if length < 22:
+                        problem = f"a message record at {body - 9} is too short"
+                        break
+                    cid, _seq, log = struct.unpack_from("<HIQ", c.records, body)
+                    found.setdefault(cid, []).append((log, body - RECORD_HEAD_BYTES))
+                elif opcode not in (Opcode.SCHEMA, Opcode.CHANNEL):
+                    problem = f"holds a {opcode_name(opcode)} record at {body - 9}"
+            if not problem and end != len(c.records):
+                problem = f"its records stop at byte {end} of {len(c.records)}"
+            c.messages = {cid: np.array(sorted(v), dtype=np.uint64).reshape(-1, 2) for cid, v in found.items()}
+            logs = [int(a[:, 0].min()) for a in c.messages.values()] + [int(a[:, 0].max()) for a in c.messages.values()]
+            if not problem and logs and (min(logs), max(logs)) != (head.message_start_time, head.message_end_time):
+                problem = (f"message_start_time / message_end_time {head.message_start_time} / "
+                           f"{head.message_end_time} ns, its messages span {min(logs)} / {max(logs)} ns")
+        part = self._chunk_part(s, c.messages.keys())
+        c.part = part  # type: ignore[attr-defined]
+        self.parts.append((s.start, s.end, part))
+        if problem:
+            self.add(part, problem, s.start)
+        return c
+
+    def _message_index(self, s: Span, chunk: _Chunk | None) -> None:
+        rec = s.record
+        cid = rec.channel_id if rec is not None else int.from_bytes(self.data[s.start + 9:s.start + 11], "little")
+        owner = f" of the chunk at offset {chunk.span.start}" if chunk is not None else ""
+        part = f"message index at offset {s.start} (channel {cid} {self.topics.get(cid, '?')}){owner}"
+        self.parts.append((s.start, s.end, part))
+        if rec is None:
+            self.add(part, f"does not parse ({s.error})", s.start)
+            return
+        if chunk is None:
+            self.add(part, "follows no chunk", s.start)
+            return
+        chunk.indexes.append(s)
+        if chunk.records is None:
+            return
+        want = chunk.messages.get(cid)
+        got = rec.entries
+        if want is None:
+            self.add(part, f"the chunk holds no message of channel {cid}", s.start)
+        elif got.shape != want.shape or not np.array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], want):
+            self.add(part, f"{len(got)} entries do not match the chunk's {len(want)} messages of channel "
+                     f"{cid} (log time, offset)", s.start)
+
+    def _gap(self, g: Gap, section: str) -> None:
+        expected = [p for (a, _b, p) in self.expected_parts() if g.start <= a < g.end]
+        op = self.data[g.start]
+        if expected:
+            part = expected[0]
+        elif op in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.METADATA, Opcode.CHUNK) or (op == Opcode.HEADER and g.start == 8):
+            part = "header" if op == Opcode.HEADER else self._part_of(Span(op, g.start, g.end))
+        else:
+            part = f"{section} at offset {g.start}"
+        self.parts.append((g.start, g.end, part))
+        self.add(part, f"{g.reason}; bytes {g.start}..{g.end} hold no readable record", g.start)
+
+    def expected_parts(self) -> list[tuple[int, int, str]]:
+        return getattr(self, "_expected", [])
+
+    def _check_data_crc(self, data_end: int) -> None:
+        self.parts.append((data_end, data_end + _DATA_END_BYTES, "data section (Data End record)"))
+        if self.data_crc is None:
+            self.checks.append("data section CRC not recorded (0)")
+            return
+        self.checks.append("data section CRC")
+        stored, computed = self.data_crc
+        if self.data_crc_ok:
+            return
+        self._located("data section (Data End CRC)", stored, computed, 0, data_end,
+                      data_end + RECORD_HEAD_BYTES, "Data End")
+
+    def _located(self, part: str, stored: int, computed: int, start: int, end: int, crc_at: int,
+                 what: str) -> None:
+        """Report a CRC mismatch over ``[start, end)`` and the part a one-byte change explains."""
+        hits = [start + h for h in locate_single_byte_error(stored, computed, end - start)]
+        diff = stored ^ computed
+        field_hit = sum(1 for k in range(4) if (diff >> (8 * k)) & 0xFF) == 1
+        where = []
+        for h in hits:
+            where.append(f"offset {h} ({self.part_at(h)})")
+        text = (f"CRC32 of bytes {start}..{end} is 0x{computed:08x}, the {what} record holds 0x{stored:08x}")
+        if where:
+            text += "; a single changed byte at " + " or ".join(where) + " would explain it"
+        if field_hit:
+            text += "; or the stored CRC itself is damaged (one byte differs)"
+        self.add(part, text, hits[0] if hits else crc_at)
+        named = {p.part for p in self.problems}
+        if field_hit and not hits:
+            self.add(self.part_at(crc_at), f"its stored {what} CRC differs from the computed one in one byte", crc_at)
+        if len(hits) == 1 and self.part_at(hits[0]) not in named:
+            self.add(self.part_at(hits[0]), f"byte {hits[0]} differs from what the {what} CRC covers "
+                     "(located from the CRC difference)", hits[0])
+
+    def part_at(self, offset: int) -> str:
+        best = None
+        for a, b, p in self.parts:
+            if a <= offset < b and (best is None or b - a < best[1] - best[0]):
+                best = (a, b, p)
+        return best[2] if best else f"byte {offset}"
+
+    # -- summary -----------------------------------------------------------------------------
+    def _scan_summary(self, start: int, footer_pos: int) -> None:
+        """Read the summary's records (before the data section, whose damage they help name)."""
+        spans, gaps, _ = scan_section(self.data, start, footer_pos, SUMMARY_OPCODES)
+        self.sum_spans, self.sum_gaps = spans, gaps
+        self.groups = [(s.record.group_opcode, s.record.group_start, s.record.group_start + s.record.group_length)
+                       for s in spans if s.opcode == Opcode.SUMMARY_OFFSET and s.record is not None]
+        exp = self._expected = []
+        for s in spans:
+            r = s.record
+            if s.opcode == Opcode.CHUNK_INDEX and r is not None:
+                exp.append((r.chunk_start_offset, r.chunk_start_offset + r.chunk_length,
+                            f"chunk at offset {r.chunk_start_offset} (t_s {r.message_start_time / NS_PER_S:.3f}.."
+                            f"{r.message_end_time / NS_PER_S:.3f})"))
+                for cid, off in r.message_index_offsets.items():
+                    exp.append((off, off + 1, f"message index at offset {off} (channel {cid}) of the chunk "
+                                f"at offset {r.chunk_start_offset}"))
+            elif s.opcode == Opcode.METADATA_INDEX and r is not None:
+                exp.append((r.offset, r.offset + r.length, f"metadata record '{r.name}'"))
+
+    def _group_at(self, offset: int) -> int | None:
+        for op, a, b in self.groups:
+            if a <= offset < b:
+                return op
+        return None
+
+    def _summary_part(self, s: Span, ordinal: int) -> str:
+        """Name a summary record by the group the summary offsets put it in (its own opcode
+        may be the damaged byte), then by its fields."""
+        op = s.opcode if s.record is not None else (self._group_at(s.start) or s.opcode)
+        r = s.record if s.opcode == op else None
+        if op in (Opcode.SCHEMA, Opcode.CHANNEL):
+            return self._part_of(Span(op, s.start, s.end, r), "summary")
+        if op == Opcode.STATISTICS:
+            return "statistics"
+        if op == Opcode.CHUNK_INDEX:
+            off = self.chunks[ordinal].span.start if ordinal < len(self.chunks) else (
+                r.chunk_start_offset if r is not None else None)
+            return f"chunk index of the chunk at offset {off}" if off is not None else f"chunk index {ordinal}"
+        if op == Opcode.METADATA_INDEX:
+            names = [self.meta_names.get(m.start, "?") for m in self.metadata_d]
+            name = names[ordinal] if ordinal < len(names) else (r.name if r is not None else "?")
+            return f"metadata index '{name}'"
+        if op == Opcode.SUMMARY_OFFSET:
+            if r is None:
+                return f"summary offset record at offset {s.start}"
+            # the group it points at names it (its group_opcode may be the damaged byte)
+            at = [g[0] for g in self._actual_groups() if g[1] == r.group_start]
+            return f"summary offset record ({opcode_name(at[0] if at else r.group_opcode)} group)"
+        return f"{opcode_name(op)} record at offset {s.start} in the summary"
+
+    def _actual_groups(self) -> list[tuple[int, int, int]]:
+        """(opcode, start, end) of each run of records of one opcode in the summary."""
+        actual: list[list[int]] = []
+        for s in self.sum_spans:
+            if s.opcode == Opcode.SUMMARY_OFFSET:
+                continue
+            if actual and actual[-1][0] == s.opcode and actual[-1][2] == s.start:
+                actual[-1][2] = s.end
+            else:
+                actual.append([s.opcode, s.start, s.end])
+        return [(a, b, c) for a, b, c in actual]
+
+    def _check_summary(self, start: int, footer_pos: int) -> None:
+        d = self.data
+        ordinals: dict[int, int] = {}
+        self.summary_named: list[tuple[Span, str]] = []
+        for s in self.sum_spans:
+            op = s.opcode if s.record is not None else (self._group_at(s.start) or s.opcode)
+            k = ordinals[op] = ordinals.get(op, -1) + 1
+            part = self._summary_part(s, k)
+            self.summary_named.append((s, part))
+            self.parts.append((s.start, s.end, part))
+            if s.record is None:
+                self.add(part, f"does not parse as {opcode_name(s.opcode)} ({s.error})", s.start)
+            if s.reframed:
+                self.add(part, "the record's opcode or length field is damaged", s.start)
+        for g in self.sum_gaps:
+            op = self._group_at(g.start)
+            part = (self._summary_part(Span(op, g.start, g.end), 0) if op is not None
+                    else f"summary section at offset {g.start}")
+            self.parts.append((g.start, g.end, part))
+            self.add(part, f"{g.reason}; bytes {g.start}..{g.end} hold no readable record", g.start)
+        # the footer: opcode, length, where the summary and its offsets start, the summary CRC
+        head = d[footer_pos:footer_pos + RECORD_HEAD_BYTES]
+        if head != bytes([Opcode.FOOTER]) + (20).to_bytes(8, "little"):
+            self.add("footer", f"record head {head.hex()} at offset {footer_pos}, expected opcode FOOTER, length 20",
+                     footer_pos)
+        foot = parse_body(Opcode.FOOTER, d[footer_pos + RECORD_HEAD_BYTES:footer_pos + FOOTER_RECORD_BYTES])
+        if foot.summary_start != start:
+            self.add("footer", f"summary_start {foot.summary_start}, the summary starts at {start} (after Data End)",
+                     footer_pos)
+        offs = [s.start for s in self.sum_spans if s.opcode == Opcode.SUMMARY_OFFSET]
+        want = offs[0] if offs else 0
+        if foot.summary_offset_start != want:
+            self.add("footer", f"summary_offset_start {foot.summary_offset_start}, the summary offsets start at {want}",
+                     footer_pos)
+        body_end = max([s.end for s in self.sum_spans if s.opcode != Opcode.SUMMARY_OFFSET], default=start)
+        if offs and offs[0] < body_end:
+            self.add("summary offsets", "summary offset records are not all after the summary's other records", offs[0])
+        if self.summary_crc is None:
+            self.checks.append("summary CRC not recorded (0)")
+        else:
+            covered = footer_pos + RECORD_HEAD_BYTES + 16  # through summary_offset_start
+            self.checks.append("summary CRC")
+            if not self.summary_crc_ok:
+                self._located("summary section (summary CRC)", *self.summary_crc, start, covered,
+                              covered, "footer's summary")
+        # the groups the summary offsets describe are the groups the summary holds
+        real = set(self._actual_groups())
+        for s, part in self.summary_named:
+            if s.opcode == Opcode.SUMMARY_OFFSET and s.record is not None:
+                r = s.record
+                g = (r.group_opcode, r.group_start, r.group_start + r.group_length)
+                if g not in real:
+                    self.add(part, f"says the {opcode_name(g[0])} group is bytes {g[1]}..{g[2]}; the summary holds "
+                             + ", ".join(f"{opcode_name(a)} {b}..{c}" for a, b, c in sorted(real, key=lambda x: x[1])),
+                             s.start)
+        described = {(op, a, b) for op, a, b in self.groups}
+        for g in sorted(real - described, key=lambda x: x[1]):
+            self.add("summary offsets", f"no summary offset record for the {opcode_name(g[0])} group at bytes "
+                     f"{g[1]}..{g[2]}", g[1])
+        self.checks.append("summary offsets, footer")
+
+    # -- the summary against the data section ---------------------------------------------------
+    def _blame(self, data_part: str, summary_part: str, what: str, offset: int | None) -> None:
+        """Report a disagreement between a data-section record and its summary counterpart on
+        the side whose CRC fails (both if neither or both fail)."""
+        if self.data_crc_ok is False and self.summary_crc_ok is not False:
+            self.add(data_part, what + " (the data section CRC fails, the summary CRC holds)", offset)
+        elif self.summary_crc_ok is False and self.data_crc_ok is not False:
+            self.add(summary_part, what + " (the summary CRC fails, the data section CRC holds)", offset)
+        else:
+            self.add(data_part, what, offset)
+            self.add(summary_part, what, offset)
+
+    def _cross_checks(self) -> None:
+        summary = {Opcode.SCHEMA: {}, Opcode.CHANNEL: {}}
+        for s, part in self.summary_named:
+            if s.opcode in summary and s.record is not None:
+                summary[s.opcode].setdefault(s.record.id, (s, part))
+        for op, data_copies, kind in ((Opcode.SCHEMA, self.schemas_d, "schema"), (Opcode.CHANNEL, self.channels_d, "channel")):
+            summ = summary[op]
+            for rid in sorted(set(data_copies) | set(summ)):
+                ds, ss = data_copies.get(rid), summ.get(rid)
+                ref = ds if ds is not None else ss[0]
+                d_part = self._part_of(Span(op, ref.start, ref.end, ref.record), "data section")
+                s_part = self._part_of(Span(op, ref.start, ref.end, ref.record), "summary")
+                if ds is None:
+                    self._blame(d_part, s_part, f"the summary holds {kind} {rid}, the data section has no readable copy",
+                                ss[0].start)
+                elif ss is None:
+                    self._blame(d_part, s_part, f"the data section holds {kind} {rid}, the summary has no readable copy",
+                                ds.start)
+                elif bytes(self._body(ds)) != bytes(self._body(ss[0])):
+                    self._blame(d_part, s_part, f"the data-section copy (offset {ds.start}) and the summary copy "
+                                f"(offset {ss[0].start}) differ", ds.start)
+        self._check_statistics()
+        self._check_chunk_indexes()
+        self._check_metadata_indexes()
+        self.checks.append("indexes against the data section")
+
+    def _data_complete(self) -> bool:
+        return (not self.data_gaps and all(s.record is not None for s in self.data_spans)
+                and all(c.records is not None for c in self.chunks))
+
+    def _check_statistics(self) -> None:
+        stats = [(s, p) for s, p in self.summary_named if s.opcode == Opcode.STATISTICS and s.record is not None]
+        if len(stats) != 1:
+            if not any(p == "statistics" for p in (q.part for q in self.problems)):
+                self.add("statistics", f"{len(stats)} readable Statistics records in the summary, expected 1")
+            return
+        s, _ = stats[0]
+        r = s.record
+        if not self._data_complete():
+            self.checks.append("statistics not compared (the data section is damaged)")
+            return
+        counts: dict[int, int] = {}
+        logs: list[int] = []
+        for c in self.chunks:
+            for cid, e in c.messages.items():
+                counts[cid] = counts.get(cid, 0) + len(e)
+                logs += [int(e[:, 0].min()), int(e[:, 0].max())]
+        for cid, times in self.loose.items():
+            counts[cid] = counts.get(cid, 0) + len(times)
+            logs += [min(times), max(times)]
+        want = {
+            "message_count": sum(counts.values()), "schema_count": len(self.schemas_d),
+            "channel_count": len(self.channels_d),
+            "attachment_count": sum(1 for x in self.data_spans if x.opcode == Opcode.ATTACHMENT),
+            "metadata_count": len(self.metadata_d), "chunk_count": len(self.chunks),
+            "message_start_time": min(logs) if logs else 0, "message_end_time": max(logs) if logs else 0,
+        }
+        bad = [f"{k} {getattr(r, k)} (the data section: {v})" for k, v in want.items() if getattr(r, k) != v]
+        got = {k: v for k, v in r.channel_message_counts.items() if v}
+        if got != {k: v for k, v in counts.items() if v}:
+            bad.append(f"channel_message_counts {got} (the data section: {counts})")
+        if bad:
+            self.add("statistics", "; ".join(bad), s.start)
+
+    def _check_chunk_indexes(self) -> None:
+        idx = [(s, p) for s, p in self.summary_named if s.opcode == Opcode.CHUNK_INDEX and s.record is not None]
+        if len(idx) != len(self.chunks) and not self.data_gaps:
+            self._blame("data section", "chunk index", f"{len(self.chunks)} chunks, {len(idx)} readable chunk indexes",
+                        None)
+        for (s, part), c in zip(idx, self.chunks):
+            h, r = c.span.record, s.record
+            if h is None:
+                continue
+            mi = [m for m in c.indexes if m.record is not None]
+            want = {
+                "chunk_start_offset": c.span.start, "chunk_length": c.span.end - c.span.start,
+                "message_start_time": h.message_start_time, "message_end_time": h.message_end_time,
+                "compression": h.compression, "compressed_size": h.records_length,
+                "uncompressed_size": h.uncompressed_size,
+                "message_index_offsets": {m.record.channel_id: m.start for m in mi},
+                "message_index_length": (c.indexes[-1].end - c.indexes[0].start) if c.indexes else 0,
+            }
+            bad = [f"{k} {getattr(r, k)} (the chunk: {v})" for k, v in want.items() if getattr(r, k) != v]
+            if bad:
+                self._blame(getattr(c, "part", self._chunk_part(c.span, None)), part, "; ".join(bad), s.start)
+
+    def _check_metadata_indexes(self) -> None:
+        idx = [(s, p) for s, p in self.summary_named if s.opcode == Opcode.METADATA_INDEX and s.record is not None]
+        by_offset = {m.start: m for m in self.metadata_d}
+        for s, part in idx:
+            r = s.record
+            m = by_offset.get(r.offset)
+            if m is None:
+                self._blame(f"metadata record '{r.name}'", part,
+                            f"the index points at offset {r.offset}, where no readable metadata record starts", s.start)
+                continue
+            if r.length != m.end - m.start or m.record is None or m.record.name != r.name:
+                name = m.record.name if m.record is not None else "?"
+                self._blame(self._metadata_part(m), part, f"the index says '{r.name}', {r.length} bytes; the record "
+                            f"at offset {r.offset} is '{name}', {m.end - m.start} bytes", s.start)
+        indexed = {s.record.offset for s, _ in idx}
+        for m in self.metadata_d:
+            if m.start not in indexed:
+                self._blame(self._metadata_part(m), "metadata index", f"no metadata index points at the record at "
+                            f"offset {m.start}", m.start)
+
+
+__all__ = ["Problem", "VerifyReport", "looks_like_mcap", "verify_log"]
