@@ -141,3 +141,89 @@ def test_arbitrary_text_raises_only_scenario_error(text: str) -> None:
         loads(text, "garbage.toml")
     except ScenarioError:
         pass
+
+
+# ---------------------------------------------------------------- files that are not plain small UTF-8 TOML
+_ICING = Path(__file__).resolve().parents[2] / "scenarios" / "dhc6_tail_icing.toml"
+
+
+def test_utf8_bom_is_accepted(tmp_path: Path) -> None:
+    """A BOM (Windows editors) is dropped; tomllib alone says "Invalid statement (at line 1)"."""
+    p = tmp_path / "bom.toml"
+    p.write_bytes(b"\xef\xbb\xbf" + _ICING.read_bytes())
+    with pytest.raises(tomllib.TOMLDecodeError):
+        tomllib.loads(p.read_text(encoding="utf-8"))  # the failure this guards against
+    sc = load(p)
+    assert sc.model == load(_ICING).model
+    assert not sc.text.startswith("\ufeff")
+
+
+@pytest.mark.parametrize("data,problem", [
+    (_ICING.read_text().encode("utf-16"), "UTF-16"),
+    (_ICING.read_bytes().replace(b"tailplane", b"tail\xffplane"), "byte 0xff at line 2"),
+    (_ICING.read_bytes() + b"#" * (1 << 20), "larger than 1048576 bytes"),
+], ids=["utf16", "bad-utf8", "too-big"])
+def test_unreadable_contents_name_the_problem(tmp_path: Path, data: bytes, problem: str) -> None:
+    p = tmp_path / "bad.toml"
+    p.write_bytes(data)
+    with pytest.raises(ScenarioError) as ei:
+        load(p)
+    assert ei.value.source == str(p) and problem in ei.value.problem, str(ei.value)
+    assert ei.value.fix
+
+
+def test_directory_is_refused(tmp_path: Path) -> None:
+    d = tmp_path / "dir.toml"
+    d.mkdir()
+    with pytest.raises(ScenarioError, match="is a directory, not a regular file"):
+        load(d)
+
+
+def test_array_nested_5000_deep_is_a_scenario_error() -> None:
+    """tomllib recurses once per level: RecursionError without the guard."""
+    text = "x = " + "[" * 5000 + "]" * 5000 + "\n"
+    with pytest.raises(ScenarioError) as ei:
+        loads(text, "deep.toml")
+    assert ei.value.source == "deep.toml" and "nests too deeply" in ei.value.problem
+
+
+def test_moderate_nesting_names_the_key(f16_text: str) -> None:
+    """40 levels parse fine but nest deeper than any scenario key: the depth check names where."""
+    text = f16_text.replace("[atmosphere]", "junk = " + "[" * 40 + "]" * 40 + "\n[atmosphere]")
+    with pytest.raises(ScenarioError) as ei:
+        loads(text, "deep.toml")
+    assert ei.value.key.startswith("initial.junk[0][0]"), str(ei.value)
+    # pydantic and _check_finite would recurse as deep as the data; a deep dict is refused the same way
+    deep: dict[str, Any] = {}
+    cur = deep
+    for _ in range(3000):
+        cur["a"] = {}
+        cur = cur["a"]
+    with pytest.raises(ScenarioError, match="nest more than"):
+        from_dict({"name": "x", "sensors": deep}, "deep.toml")
+
+
+# ---------------------------------------------------------------- misspelt keys: "did you mean" everywhere
+_ICING_TEXT = _ICING.read_text()
+
+
+@pytest.mark.parametrize("old,new,key,meant", [
+    ("t_start_s = 10.0", "t_strat_s = 10.0", "faults[0].t_strat_s", "t_start_s"),  # a required key: reported as missing before
+    ("ramp_s = 60.0", "rmp_s = 60.0", "faults[0].rmp_s", "ramp_s"),
+    ('target = "airframe"', 'targt = "airframe"', "faults[0].targt", "target"),
+    ("t_start_s = 5.0", "t_strat_s = 5.0", "maneuvers[0].t_strat_s", "t_start_s"),
+    ("vc_kts = 100.0", "vc_kts = 100.0\nphi_degs = 3.0", "initial.phi_degs", "phi_deg"),
+    ("[initial]", "[atmosphere]\nturbulance = 'none'\n[initial]", "atmosphere.turbulance", "turbulence"),
+    ("[initial]", "[autopilot]\naltitud = true\n[initial]", "autopilot.altitud", "altitude"),
+    ("[initial]", "[sensors]\nnoise_scal = 1.0\n[initial]", "sensors.noise_scal", "noise_scale"),
+    ("[initial]", "[limits]\nalpha_mx_deg = 1.0\n[initial]", "limits.alpha_mx_deg", "alpha_max_deg"),
+])
+def test_misspelt_keys_get_did_you_mean(old: str, new: str, key: str, meant: str) -> None:
+    assert old in _ICING_TEXT
+    with pytest.raises(ScenarioError) as ei:
+        loads(_ICING_TEXT.replace(old, new, 1), "typo.toml")
+    e = ei.value
+    assert e.key == key, str(e)
+    typo = key.rsplit(".", 1)[-1]
+    assert f"unknown key {typo!r} (did you mean {meant!r}?)" in e.problem, str(e)
+    assert meant in e.fix
