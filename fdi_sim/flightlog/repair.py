@@ -1,12 +1,19 @@
-"""Rebuild a flight log cut off by a crash (``fdi-sim repair LOG``).
+"""Rebuild a flight log cut off by a crash, or damaged (``fdi-sim repair LOG``).
 
 A run killed before :meth:`FlightLogWriter.close` leaves an MCAP file without Data End,
 summary and footer, possibly ending inside a chunk. Everything the writer flushed before the
 crash is a sequence of complete records (MCAP spec, "Records": opcode, uint64 length, body),
-so the file is read from the start record by record; the scan stops at the first record cut
-short. Every complete Schema, Channel and Metadata record is kept, every complete Chunk whose
-size and CRC check out gives its messages back, and a new file with message indexes, summary
-and footer is written with the same low-level writer as a normal run.
+so the file is read from the start record by record (:func:`fdi_sim.flightlog.verify.scan_log`);
+the scan ends at the record cut short. After a damaged record the scan resynchronises at the
+next offset where records parse again (:func:`fdi_sim.flightlog.framing.scan_section`), so
+one bad byte costs one record, not the rest of the file.
+
+Schemas and channels exist twice in a complete file, in the data section and in the summary.
+Each is taken from the copy most likely intact: a copy inside a chunk (its CRC checked), then a
+section whose CRC (Data End's data_section_crc, the footer's summary_crc) holds, then a section
+without a CRC (a cut-off file), then a damaged section; within a rank the data section first.
+Every complete Chunk whose size and CRC check out gives its messages back; a new file with
+message indexes, summary and footer is written with the same low-level writer as a normal run.
 """
 from __future__ import annotations
 
@@ -19,7 +26,7 @@ from pathlib import Path
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Message, Metadata, Schema
+from mcap.records import Channel, Schema
 
 from fdi_sim.errors import LogError
 from fdi_sim.flightlog.records import (
@@ -27,16 +34,17 @@ from fdi_sim.flightlog.records import (
     RawMessage,
     build_chunk,
     has_footer,
-    parse_chunk,
     scan_records,
 )
 from fdi_sim.flightlog.schemas import SCHEMA_ENCODING_JSONSCHEMA, SCHEMA_ENCODING_ROS2MSG
+from fdi_sim.flightlog.verify import looks_like_mcap, scan_log
 from fdi_sim.flightlog.writer import McapFileWriter
 from fdi_sim.units import NS_PER_S
 
 #: records that only index or summarize: rebuilt, never copied
-_OP_DERIVED = frozenset({Opcode.MESSAGE_INDEX, Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX,
-                         Opcode.STATISTICS, Opcode.METADATA_INDEX, Opcode.SUMMARY_OFFSET})
+_OP_DERIVED = frozenset({Opcode.HEADER, Opcode.MESSAGE_INDEX, Opcode.DATA_END})
+#: trust rank of a section by its CRC: holds, not recorded / cut off, fails
+_CRC_RANK = {True: 1, None: 2, False: 3}
 #: messages per chunk when a file held messages outside chunks
 _LOOSE_CHUNK_MESSAGES = 4096
 #: what parsing a damaged record raises (UnicodeDecodeError and JSONDecodeError are ValueErrors)
@@ -64,7 +72,11 @@ class RepairReport:
     metadata_names : tuple of str
     records_skipped : int
         Complete records that could not be used (attachments, corrupted or unknown records,
-        messages of unknown channels).
+        messages of unknown channels, unreadable stretches of bytes).
+    source_problems : tuple of str
+        What :func:`~fdi_sim.flightlog.verify_log` finds in the source (``part: what``).
+    copies_from_summary : tuple of str
+        Schemas and channels taken from the summary because the data-section copy is damaged.
     """
 
     src: Path
@@ -80,6 +92,8 @@ class RepairReport:
     had_footer: bool = False
     metadata_names: tuple[str, ...] = ()
     records_skipped: int = 0
+    source_problems: tuple[str, ...] = ()
+    copies_from_summary: tuple[str, ...] = ()
 
     def format(self) -> str:
         """A terminal summary (what ``fdi-sim repair LOG`` prints)."""
@@ -95,6 +109,12 @@ class RepairReport:
         ]
         lines += [f"  {topic}: {n}" for topic, n in self.message_counts.items()]
         lines.append("metadata: " + (", ".join(self.metadata_names) if self.metadata_names else "(none)"))
+        if self.copies_from_summary:
+            lines.append("taken from the summary (the data-section copy is damaged): "
+                         + ", ".join(self.copies_from_summary))
+        if self.source_problems:
+            lines.append(f"the source has {len(self.source_problems)} problems (fdi-sim verify), first: "
+                         + self.source_problems[0])
         return "\n".join(lines)
 
 
@@ -108,6 +128,11 @@ class _Recovered:
     skipped: int = 0
     had_footer: bool = False
     bytes_used: int = len(MCAP_MAGIC)
+    problems: tuple[str, ...] = ()
+    from_summary: list[str] = field(default_factory=list)
+    # candidate copies: id -> [(rank, order, body)], the best rank wins
+    schema_copies: dict[int, list[tuple[int, int, memoryview, str]]] = field(default_factory=dict)
+    channel_copies: dict[int, list[tuple[int, int, memoryview, str]]] = field(default_factory=dict)
 
 
 def repair_log(src: str | Path, dst: str | Path | None = None, *, compression: str | None = "zstd") -> RepairReport:
@@ -142,7 +167,8 @@ def repair_log(src: str | Path, dst: str | Path | None = None, *, compression: s
     if data[:len(MCAP_MAGIC)] != MCAP_MAGIC:
         if len(data) < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(data):
             raise LogError(str(src), "the file was cut off inside the MCAP magic: nothing to recover")
-        raise LogError(str(src), "not an MCAP file (it does not start with the MCAP magic bytes)")
+        if len(data) <= len(MCAP_MAGIC) or not looks_like_mcap(data):
+            raise LogError(str(src), "not an MCAP file (it does not start with the MCAP magic bytes)")
     rec = _scan(data)
     if not rec.channels and not rec.metadata:
         raise LogError(str(src), f"nothing to recover: no complete channel or metadata record in the "
@@ -172,41 +198,71 @@ def _keep_channel(rec: _Recovered, body: memoryview) -> None:
 
 
 def _scan(data: bytes) -> _Recovered:
-    """Collect every usable complete record of the data section."""
+    """Collect every usable record: the data section read with resynchronisation, the
+    summary's copies of schemas and channels, and the chunks whose CRC holds."""
     rec = _Recovered()
-    view = memoryview(data)
+    v = scan_log(data)
+    rec.problems = tuple(p.format() for p in v.problems)
+    rec.had_footer = has_footer(data)
+    data_rank, summary_rank = _CRC_RANK[v.data_crc_ok], _CRC_RANK[v.summary_crc_ok]
+    spans = v.data_spans
+    chunked = any(s.opcode == Opcode.CHUNK for s in spans)
     loose: list[RawMessage] = []
-    for opcode, start, length in scan_records(view, len(MCAP_MAGIC)):
-        body = view[start:start + length]
-        rec.bytes_used = start + length
-        try:
-            if opcode in (Opcode.DATA_END, Opcode.FOOTER):
-                rec.had_footer = has_footer(data)
-                break
-            if opcode == Opcode.SCHEMA:
-                _keep_schema(rec, body)
-            elif opcode == Opcode.CHANNEL:
-                _keep_channel(rec, body)
-            elif opcode == Opcode.METADATA:
-                m = Metadata.read(_stream(body))
-                rec.metadata.append((m.name, dict(m.metadata)))
-            elif opcode == Opcode.MESSAGE:
-                msg = Message.read(_stream(body), length)
-                loose.append(RawMessage(msg.channel_id, msg.sequence, msg.log_time, bytes(msg.data)))
-            elif opcode == Opcode.CHUNK:
-                try:
-                    rec.chunks.append(_chunk_messages(parse_chunk(body).records, rec))
-                except _DAMAGED:
-                    rec.chunks_dropped += 1
-            elif opcode == Opcode.HEADER or opcode in _OP_DERIVED:
-                pass
-            else:  # attachments and unknown records are not carried over
-                rec.skipped += 1
-        except _DAMAGED:
+    rec.skipped = len(v.data_gaps)
+    chunk_records = {c.span.start: c.records for c in v.chunks}
+    for order, s in enumerate(spans):
+        rec.bytes_used = max(rec.bytes_used, s.end)
+        body = memoryview(data)[s.start + 9:s.end]
+        if s.opcode == Opcode.CHUNK:
+            records = chunk_records.get(s.start)
+            try:
+                if records is None:
+                    raise ValueError("damaged chunk")
+                rec.chunks.append(_chunk_messages(records, rec))
+            except _DAMAGED:
+                rec.chunks_dropped += 1
+        elif s.record is None:
             rec.skipped += 1
+        elif s.opcode == Opcode.SCHEMA:
+            rec.schema_copies.setdefault(s.record.id, []).append((data_rank, order, body, "data"))
+        elif s.opcode == Opcode.CHANNEL:
+            rec.channel_copies.setdefault(s.record.id, []).append((data_rank, order, body, "data"))
+        elif s.opcode == Opcode.METADATA:
+            rec.metadata.append((s.record.name, dict(s.record.metadata)))
+        elif s.opcode == Opcode.MESSAGE and not chunked:
+            # in a chunked file a stray Message record is more likely a damaged index record
+            m = s.record
+            loose.append(RawMessage(m.channel_id, m.sequence, m.log_time, bytes(m.data)))
+        elif s.opcode not in _OP_DERIVED:  # attachments and stray records are not carried over
+            rec.skipped += 1
+    if v.sum_spans:
+        rec.bytes_used = max(rec.bytes_used, v.sum_spans[0].start)
+    for order, s in enumerate(v.sum_spans, start=len(spans)):
+        body = memoryview(data)[s.start + 9:s.end]
+        if s.record is not None and s.opcode == Opcode.SCHEMA:
+            rec.schema_copies.setdefault(s.record.id, []).append((summary_rank, order, body, "summary"))
+        elif s.record is not None and s.opcode == Opcode.CHANNEL:
+            rec.channel_copies.setdefault(s.record.id, []).append((summary_rank, order, body, "summary"))
+    for sid, copies in sorted(rec.schema_copies.items()):
+        _choose(rec, copies, _keep_schema, f"schema {sid}")
+    for cid, copies in sorted(rec.channel_copies.items()):
+        _choose(rec, copies, _keep_channel, f"channel {cid}")
     for i in range(0, len(loose), _LOOSE_CHUNK_MESSAGES):
         rec.chunks.append(loose[i:i + _LOOSE_CHUNK_MESSAGES])
     return rec
+
+
+def _choose(rec: _Recovered, copies: list[tuple[int, int, memoryview, str]], keep: object, name: str) -> None:
+    """Keep the best-ranked copy that passes its checks (``keep`` raises for a bad one)."""
+    for _rank, _order, body, where in sorted(copies, key=lambda c: c[:2]):
+        try:
+            keep(rec, body)  # type: ignore[operator]
+        except _DAMAGED:
+            continue
+        if where == "summary" and not any(c[3] == "data" and bytes(c[2]) == bytes(body) for c in copies):
+            rec.from_summary.append(name)
+        return
+    rec.skipped += 1
 
 
 def _chunk_messages(records: bytes, rec: _Recovered) -> list[RawMessage]:
@@ -269,7 +325,7 @@ def _write(src: Path, dst: Path, data: bytes, rec: _Recovered, compression: str 
         chunks_recovered=sum(1 for c in rec.chunks if c),
         chunks_dropped=rec.chunks_dropped, bytes_total=len(data), bytes_used=rec.bytes_used,
         had_footer=rec.had_footer, metadata_names=tuple(name for name, _ in rec.metadata),
-        records_skipped=skipped,
+        records_skipped=skipped, source_problems=rec.problems, copies_from_summary=tuple(rec.from_summary),
     )
 
 

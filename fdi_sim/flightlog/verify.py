@@ -157,9 +157,17 @@ def verify_log(path: str | Path) -> VerifyReport:
     if not looks_like_mcap(data):
         raise LogError(str(p), "not an MCAP file (neither end holds the MCAP magic bytes); "
                        "pass a flight log written by `fdi-sim run`")
+    v = scan_log(data)
+    return VerifyReport(p, len(data), tuple(v.problems), tuple(v.checks))
+
+
+def scan_log(data: bytes) -> _Verifier:
+    """Run every check on the bytes of a log; the result also carries what was found
+    (``data_spans``, ``sum_spans``, ``chunks`` with their decompressed records,
+    ``data_crc_ok``, ``summary_crc_ok``, ``problems``). Package-internal: used by repair."""
     v = _Verifier(data)
     v.run()
-    return VerifyReport(p, len(data), tuple(v.problems), tuple(v.checks))
+    return v
 
 
 @dataclass
@@ -168,6 +176,7 @@ class _Chunk:
     records: bytes | None = None
     messages: dict[int, np.ndarray] = field(default_factory=dict)  # cid -> (n, 2) log, offset
     indexes: list[Span] = field(default_factory=list)  # the Message Index records after it
+    part: str = ""
 
 
 class _Verifier:
@@ -363,6 +372,8 @@ class _Verifier:
         rec = s.record
         rid = rec.id if rec is not None and hasattr(rec, "id") else int.from_bytes(
             self.data[s.start + 9:s.start + 11], "little")
+        if s.opcode == Opcode.HEADER:
+            return "header"
         if s.opcode == Opcode.SCHEMA:
             return f"schema record {rid} ({self.schema_names.get(rid, '?')}) in the {section}"
         if s.opcode == Opcode.CHANNEL:
@@ -394,7 +405,7 @@ class _Verifier:
             part = self._chunk_part(s, None)
             self.add(part, f"does not parse ({s.error})", s.start)
             self.parts.append((s.start, s.end, part))
-            c.part = part  # type: ignore[attr-defined]
+            c.part = part
             return c
         head = s.record
         problem = ""
@@ -423,7 +434,7 @@ class _Verifier:
                 problem = (f"message_start_time / message_end_time {head.message_start_time} / "
                            f"{head.message_end_time} ns, its messages span {min(logs)} / {max(logs)} ns")
         part = self._chunk_part(s, c.messages.keys())
-        c.part = part  # type: ignore[attr-defined]
+        c.part = part
         self.parts.append((s.start, s.end, part))
         if problem:
             self.add(part, problem, s.start)
@@ -728,7 +739,7 @@ class _Verifier:
             }
             bad = [f"{k} {getattr(r, k)} (the chunk: {v})" for k, v in want.items() if getattr(r, k) != v]
             if bad:
-                self._blame(getattr(c, "part", self._chunk_part(c.span, None)), part, "; ".join(bad), s.start)
+                self._blame(c.part or self._chunk_part(c.span, None), part, "; ".join(bad), s.start)
 
     def _check_metadata_indexes(self) -> None:
         idx = [(s, p) for s, p in self.summary_named if s.opcode == Opcode.METADATA_INDEX and s.record is not None]

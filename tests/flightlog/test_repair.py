@@ -185,10 +185,13 @@ def test_damaged_chunk_is_dropped_and_the_rest_kept(tmp_path: Path) -> None:
     assert "dropped 1 damaged chunks" in report.format()
 
 
+@pytest.mark.parametrize("complete", [True, False], ids=["complete", "cut-off"])
 @pytest.mark.parametrize("encoding", ["ros2msg", "jsonschema"])
-def test_schema_with_undecodable_text_is_dropped_with_its_channels(tmp_path: Path, encoding: str) -> None:
-    """Schema records carry no CRC: one whose text is not UTF-8 (or not JSON) is skipped, and
-    the channels that use it are dropped with their messages; the rest is kept."""
+def test_schema_with_undecodable_text_comes_from_the_summary_or_is_dropped(
+        tmp_path: Path, encoding: str, complete: bool) -> None:
+    """Schema records carry no CRC: one whose text is not UTF-8 (or not JSON) is not used. In a
+    complete file the summary's intact copy replaces it and nothing is lost; in a file cut off
+    before its summary the channels that use it are dropped with their messages."""
     src = tmp_path / "full.mcap"
     _small_log(src)
     data = bytearray(src.read_bytes())
@@ -196,15 +199,23 @@ def test_schema_with_undecodable_text_is_dropped_with_its_channels(tmp_path: Pat
     name = b"fdi_sim/msg/TruthState" if encoding == "ros2msg" else b"fdi_sim/msg/Alarm"
     text = data.index(enc, data.index(name)) + len(enc) + 4  # after the encoding and the u32 length
     data[text] = 0xFF  # never valid in UTF-8
+    if not complete:
+        with open(tmp_path / "full.mcap", "rb") as f:
+            summary_start = make_reader(f).get_summary().chunk_indexes[-1].chunk_start_offset + 1
+        data = data[:summary_start]  # cut inside the last chunk: no Data End, no summary
     src.write_bytes(bytes(data))
     report = repair_log(src)
-    assert report.records_skipped >= 1
     dropped = "/truth/state" if encoding == "ros2msg" else "/fdi/alarms"
-    kept = {"/truth/state": 240, "/sensors/q": 80, "/fdi/alarms": 5}
-    del kept[dropped]
-    assert report.message_counts == kept
     log = read_log(report.dst)
-    assert set(log.topics) == set(kept)
+    if complete:
+        sid = 1 if encoding == "ros2msg" else 3
+        assert report.copies_from_summary == (f"schema {sid}",)
+        assert report.message_counts == {"/truth/state": 240, "/sensors/q": 80, "/fdi/alarms": 5}
+        assert dropped in log.topics and "data section" in report.source_problems[0]
+    else:
+        assert report.records_skipped >= 1 and report.copies_from_summary == ()
+        assert dropped not in report.message_counts and dropped not in log.topics
+        assert set(log.topics) == set(report.message_counts) and len(log.topics) >= 1
 
 
 def test_bad_sources_and_destinations(tmp_path: Path) -> None:
