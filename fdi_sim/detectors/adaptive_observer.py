@@ -281,16 +281,21 @@ class AdaptiveObserver:
         Initial observer matrices (default the model's).
     x0_hat : array, optional
         Initial state estimate (deviation from trim).
+    normalized : bool
+        Divide each update by ``1 + |xh|^2 + |u|^2`` (normalized gradient law; not in Sidar).
+        The unnormalized law's error loop has the per-step gain ``m |xh|^2`` (eq. 24 with
+        ``M C = m I``) and diverges once it passes 2; normalized, the gain stays below ``m``
+        whatever the units of the states (JSBSim models: ``|xh|^2`` of 25-300 in ft, ft/s, rad).
     """
 
     def __init__(
         self, model: LinearModel, K: NDArray, M: NDArray, N: NDArray, mask_A: NDArray | None = None,
         mask_B: NDArray | None = None, S: NDArray | None = None, alpha: float = 1e-3, threshold: float | None = None,
         input_hold: Literal["zoh", "foh"] = "zoh", A0: NDArray | None = None, B0: NDArray | None = None,
-        x0_hat: NDArray | None = None, id: str = "adaptive-observer-v1",
+        x0_hat: NDArray | None = None, id: str = "adaptive-observer-v1", normalized: bool = False,
     ) -> None:
         n, p, m = model.n_states, model.n_inputs, model.n_outputs
-        self.model, self.id = model, id
+        self.model, self.id, self.normalized = model, id, bool(normalized)
         self.K = np.asarray(K, float).reshape(n, m)
         self.M, self.N = np.asarray(M, float).reshape(n, m), np.asarray(N, float).reshape(n, m)
         self.mask_A = np.ones((n, n), bool) if mask_A is None else np.asarray(mask_A, bool).reshape(n, n)
@@ -340,9 +345,14 @@ class AdaptiveObserver:
     def _rhs(self, xh: Array, A0: Array, B0: Array, u: Array, y: Array) -> tuple[Array, Array, Array]:
         eps = y - self._C @ xh - self._D @ u  # eq. 4
         dx = A0 @ xh + B0 @ u + self.K @ eps  # eq. 2 with the adapted matrices
-        dA = np.outer(self.M @ eps, xh) * self.mask_A  # eq. 22a
-        dB = np.outer(self.N @ eps, u) * self.mask_B  # eq. 22b
+        s = self._scale(xh, u)
+        dA = np.outer(s * (self.M @ eps), xh) * self.mask_A  # eq. 22a
+        dB = np.outer(s * (self.N @ eps), u) * self.mask_B  # eq. 22b
         return dx, dA, dB
+
+    def _scale(self, xh: Array, u: Array) -> float:
+        """1, or ``1 / (1 + |xh|^2 + |u|^2)`` for the normalized law."""
+        return 1.0 / (1.0 + float(xh @ xh) + float(u @ u)) if self.normalized else 1.0
 
     def _integrate(self, t0: float, u0: Array, y0: Array, t1: float, u1: Array, y1: Array) -> None:
         h = t1 - t0
@@ -375,9 +385,10 @@ class AdaptiveObserver:
             if self.model.is_discrete:
                 eps = dy - self._C @ self.x_hat - self._D @ du
                 xh = self.x_hat
+                sc = self._scale(xh, du)
                 # eq. 23 at its own sample, adapted entries only: A0[i, j] += (M eps)_i xh_j, B0[i, j] += (N eps)_i u_j
-                self.A0.flat[self._iA] += (self.M @ eps)[self._rowA] * xh[self._colA]
-                self.B0.flat[self._iB] += (self.N @ eps)[self._rowB] * du[self._colB]
+                self.A0.flat[self._iA] += sc * (self.M @ eps)[self._rowA] * xh[self._colA]
+                self.B0.flat[self._iB] += sc * (self.N @ eps)[self._rowB] * du[self._colB]
                 self.x_hat = self.A0 @ xh + self.B0 @ du + self.K @ eps  # eq. 2, discrete, with A0(k), B0(k)
             else:
                 if self._prev is not None:
