@@ -30,6 +30,7 @@ from typing import Callable, Sequence
 
 import control
 import numpy as np
+import scipy.linalg as sla
 from numpy.typing import NDArray
 from scipy.signal import place_poles
 
@@ -96,16 +97,116 @@ def _is_stable(poles: NDArray, discrete: bool) -> bool:
     return bool(np.all(np.abs(poles) < 1.0)) if discrete else bool(np.all(np.real(poles) < 0.0))
 
 
-def check_observable(A: NDArray, C: NDArray, rtol: float = 1e-9) -> None:
-    """Raise :class:`DesignError` if ``(A, C)`` is not observable (Lemma 2.1.3, condition 1)."""
+#: relative tolerance of the scaled PBH test in :func:`check_observable`: about sqrt(eps), the
+#: accuracy of an eigenvalue of a non-normal matrix (an eigenvalue moves by O(sqrt(eps)) when A
+#: has a near-defective pair), so a smaller singular value cannot be told from zero; four orders
+#: below the least observable mode of the default grids (DHC-6 prop_rpm, 1.0e-4 at 120 Hz ZOH,
+#: 1.2e-3 continuous; F-16 h_ft 2.7e-2), so no mode a sensor really sees is refused.
+OBSERVABILITY_RTOL = 1e-8
+
+
+def observability_margins(A: NDArray, C: NDArray) -> tuple[NDArray[np.complex128], NDArray[np.float64], Array]:
+    """Scaled Popov-Belevitch-Hautus margins of every mode of ``(A, C)``.
+
+    A mode ``lambda`` of ``A`` is unobservable iff ``[lambda I - A; C]`` loses rank (PBH test). The
+    test is made scale-free first: a diagonal similarity ``A~ = T^-1 A T`` balances ``A``
+    (LAPACK ``gebal``, no permutation), ``C~ = C T`` has its rows normalized (a sensor's unit does
+    not matter), and the smallest singular value is divided by ``max(||A~||, 1)``. The Krylov
+    matrix ``[C; CA; ...; CA^(n-1)]`` is not used: its blocks grow like ``|lambda_max|^(n-1)``
+    (a continuous F-16 at 50 rad/s: 1e15), so any relative rank test calls slow modes unobservable.
+
+    Returns
+    -------
+    eigenvalues : (n,) complex array
+        The modes of ``A`` [1/s or per step].
+    margins : (n,) array
+        Relative smallest singular value of the scaled PBH matrix per mode (0 = unobservable).
+    directions : (n, n) complex array
+        Columns: the unit state direction [state units] closest to unobservable for each mode.
+    """
+    A, C = np.asarray(A, float), np.asarray(C, float)
     n = A.shape[0]
-    O = control.obsv(A, C)
-    r = _rank(O, rtol)
-    if r < n:
-        unobs = null_basis(O, rtol)
+    _, (t, _) = sla.matrix_balance(A, permute=False, separate=True)
+    At = A * (t[None, :] / t[:, None])  # T^-1 A T with T = diag(t)
+    Ct = C * t[None, :]
+    Ct = _unit_rows(Ct)
+    scale = max(float(np.linalg.norm(At, 2)), 1.0)
+    lams = np.linalg.eigvals(At)
+    margins = np.empty(n)
+    dirs = np.empty((n, n), complex)
+    for j, lam in enumerate(lams):
+        _, s, vh = np.linalg.svd(np.vstack([lam * np.eye(n) - At, Ct]))
+        margins[j] = s[-1] / scale
+        v = t * vh[-1].conj()  # back to the model's state coordinates, x = T x~
+        dirs[:, j] = v / np.linalg.norm(v)
+    return lams, margins, dirs
+
+
+def unobservable_subspace(A: NDArray, C: NDArray, rtol: float = OBSERVABILITY_RTOL) -> Array:
+    """Orthonormal basis (columns) of the unobservable subspace of ``(A, C)``.
+
+    The largest A-invariant subspace in ``N(C)``, by the orthogonal recursion ``V_0 = N(C)``,
+    ``V_(j+1) = {x in V_j : A x in V_j}`` (the observability staircase) on the balanced, row-normalized
+    system of :func:`observability_margins`: every step works on orthonormal bases, so unlike the
+    null space of the Krylov matrix ``[C; CA; ...]`` nothing is raised to the power n - 1 (with
+    the DHC-6 throttle at 120 Hz the Krylov singular values fall to 2.5e-10 of the largest for a
+    direction the PBH test sees at 1e-3, which a 1e-9 rank test counts as a second detection dimension).
+    A direction counts as zero below ``rtol`` times ``max(||A~||, 1)`` (or times 1 for the unit rows of ``C~``).
+    """
+    A, C = np.asarray(A, float), np.asarray(C, float)
+    n = A.shape[0]
+    _, (t, _) = sla.matrix_balance(A, permute=False, separate=True)
+    At = A * (t[None, :] / t[:, None])  # T^-1 A T
+    Ct = C * t[None, :]
+    Ct = _unit_rows(Ct)
+    scale = max(float(np.linalg.norm(At, 2)), 1.0)
+    V = _null_abs(Ct, rtol) if Ct.size else np.eye(n)
+    while V.shape[1]:
+        # z with (I - V V') A V z = 0 keeps A V z inside span(V)
+        Z = _null_abs((At @ V) - V @ (V.T @ At @ V), rtol * scale)
+        if Z.shape[1] == V.shape[1]:
+            break
+        V = V @ Z
+    if not V.shape[1]:
+        return np.zeros((n, 0))
+    return sla.orth(t[:, None] * V)  # back to the model's coordinates, x = T x~
+
+
+def _unit_rows(C: Array) -> Array:
+    """Rows of ``C`` normalized to unit length; rows of rounding noise are dropped.
+
+    A row counts as zero below ``max(1e-12, 1e-12 * max row norm)``: the absolute floor of
+    :func:`_svd_tol`, because ``C' = (I - Cf (Cf)^+) C`` with one output is rounding noise (~1e-16) that a
+    normalization would otherwise blow up into a sensor.
+    """
+    rows = np.linalg.norm(C, axis=1)
+    keep = rows > max(1e-12, 1e-12 * (rows.max() if rows.size else 0.0))
+    return C[keep] / rows[keep, None]
+
+
+def _null_abs(M: Array, tol: float) -> Array:
+    """Orthonormal null-space basis of ``M`` with an absolute singular-value tolerance ``tol``."""
+    _, s, vh = np.linalg.svd(M, full_matrices=True)
+    r = int(np.sum(s > tol))
+    return vh[r:].T.copy()
+
+
+def check_observable(A: NDArray, C: NDArray, rtol: float = OBSERVABILITY_RTOL) -> None:
+    """Raise :class:`DesignError` if ``(A, C)`` is not observable (Lemma 2.1.3, condition 1).
+
+    The scaled PBH test of :func:`observability_margins`; a mode is unobservable when its margin
+    is at most ``rtol`` (default :data:`OBSERVABILITY_RTOL`).
+    """
+    lams, margins, dirs = observability_margins(A, C)
+    bad = np.flatnonzero(margins <= rtol)
+    if bad.size:
+        j = int(bad[np.argmin(margins[bad])])
+        v = dirs[:, j]
+        v = (v * np.exp(-1j * np.angle(v[np.argmax(np.abs(v))]))).real  # a real representative
         raise DesignError(
-            f"(A, C) is not observable: observability matrix rank {r} < n = {n}; unobservable direction "
-            f"{np.round(unobs[:, 0], 4).tolist()}. Add a sensor that sees it, or remove that state from the model."
+            f"(A, C) is not observable: {bad.size} of {A.shape[0]} modes fail the scaled PBH test (relative margin "
+            f"<= {rtol:g}); mode {np.round(lams[j], 6)} has margin {margins[j]:.2e}, direction "
+            f"{np.round(v, 4).tolist()}. Add a sensor that sees it, or remove that state from the model."
         )
 
 
@@ -242,7 +343,7 @@ def detection_space(A: NDArray, C: NDArray, f: NDArray, name: str = "f", rtol: f
     """
     A, C = np.asarray(A, float), np.asarray(C, float)
     f = np.asarray(f, float).reshape(-1)
-    check_observable(A, C, rtol)
+    check_observable(A, C)
     mu, fmu = _first_visible_power(A, C, f, rtol)
     if mu < 0:
         raise DesignError(f"fault {name!r}: C A^j f = 0 for every j < n; the fault is invisible at the outputs.")
@@ -250,8 +351,9 @@ def detection_space(A: NDArray, C: NDArray, f: NDArray, name: str = "f", rtol: f
     cf_pinv = cf[None, :] / (cf @ cf)  # (Cf)^+ = ((Cf)'Cf)^-1 (Cf)'   (Lemma 2.1.5)
     Cp = (np.eye(C.shape[0]) - cf[:, None] @ cf_pinv) @ C  # C' (eq. 2.34)
     Kp = A - (A @ fmu)[:, None] @ cf_pinv @ C  # K' (eq. 2.37)
-    M = control.obsv(Kp, Cp)  # eq. 2.36
-    D = null_basis(M, rtol)
+    # D_f = N([C'; C'K'; ...; C'K'^(n-1)]) (eq. 2.36), the unobservable subspace of (K', C'),
+    # computed by the orthogonal staircase rather than from the Krylov matrix itself
+    D = unobservable_subspace(Kp, Cp)
     k = D.shape[1]
     if k == 0:
         raise DesignError(f"fault {name!r}: empty detection space (numerical rank of M is n); check the model scaling.")
@@ -456,7 +558,7 @@ def beard_jones_gain(
         raise DesignError(f"{len(names)} names for {r} fault directions")
     if len(detection_poles) != r:
         raise DesignError(f"detection_poles has {len(detection_poles)} entries for {r} faults; give one list per fault")
-    check_observable(A, C, rtol)
+    check_observable(A, C)
     sep = output_separability(A, C, F, rtol)
     for i, mu in enumerate(sep.mu):
         if mu < 0:
@@ -488,10 +590,15 @@ def beard_jones_gain(
     Ai = A - L0 @ C  # eq. 2.46
     Proj = np.eye(m) - CF @ CFp
     Ci = Proj @ C  # eq. 2.45
-    U = null_basis(control.obsv(Ai, Ci), rtol)  # unobservable subspace, contains every D_i
+    U = unobservable_subspace(Ai, Ci)  # unobservable subspace, contains every D_i
     O = null_basis(U.T) if U.shape[1] else np.eye(n)
     n_obs = O.shape[1]
-    Vr = range_basis(Proj)  # orthonormal basis of the remaining output directions
+    # orthonormal basis of the remaining output directions the states reach: range(Ci), not
+    # range(Proj). An exact relation among the model's outputs (DHC-6 at every default point:
+    # theta_rad - alpha_rad = hdot_fps / V, C of rank 13 for 14 outputs) would otherwise make
+    # C1 row-rank deficient and scipy's place_poles (which needs C1' of full column rank) fails;
+    # such an output combination carries no state, so the gain along it is zero anyway.
+    Vr = range_basis(Ci)
     comp = np.asarray(completion_poles(n_obs) if callable(completion_poles) else completion_poles, dtype=complex).reshape(-1)
     if comp.size != n_obs:
         raise PoleCountError(
