@@ -12,6 +12,7 @@ Every trim is checked afterwards: the accelerations of a tiny real step must be 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import math
 import os
 import re
@@ -131,19 +132,21 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
     fdm.set_trim_status(False)
     mode = 5 if (op.phi_deg and ac.name == "f16") else 1
     jsb_error = ""
-    with _captured_stdout() as out:  # JSBSim's trimmer prints its report to C stdout
+    # JSBSim's trimmer reports through its logger (jsbsim >= 1.3.3, else C stdout): keep it for the message
+    with _captured_stdout() as out, _captured_jsbsim_log() as log:
         level = fdm.get_debug_level()
-        if out.active:
-            fdm.set_debug_level(1)  # level 1 prints the per-axis report of a failed trim (FGTrimAxis::AxisReport)
+        if out.active or log.active:
+            fdm.set_debug_level(1)  # level 1 reports each axis of a failed trim (FGTrimAxis::AxisReport)
         try:
             fdm["simulation/do_simple_trim"] = mode
         except jsbsim.TrimFailureError as exc:
             jsb_error = str(exc) or "JSBSim trim failed"
         finally:
             fdm.set_debug_level(level)
+    report = log.text + out.text
     if ac.name == "f16":
         if jsb_error:
-            raise TrimError(ac.name, point, _jsbsim_failure(ac, jsb_error, parse_trim_report(out.text)),
+            raise TrimError(ac.name, point, _jsbsim_failure(ac, jsb_error, report),
                             _envelope_fix(ac, op))
         fdm.get_propulsion().get_steady_state()
         res = float(np.max(np.abs(_tiny_step_accelerations(ac))))
@@ -261,9 +264,10 @@ def parse_trim_report(text: str) -> tuple[TrimAxisReport, ...]:
     return tuple(out)
 
 
-def _jsbsim_failure(ac: Aircraft, jsb_error: str, axes: tuple[TrimAxisReport, ...]) -> str:
-    """Why JSBSim's trim failed: the axes it did not trim, and the flight condition."""
+def _jsbsim_failure(ac: Aircraft, jsb_error: str, report: str) -> str:
+    """Why JSBSim's trim failed: the axes it did not trim (from its ``report``), and the flight condition."""
     fdm = ac.fdm
+    axes = parse_trim_report(report)
     cond = (f"the point is VC {fdm['velocities/vc-kts']:.0f} kt, Mach {fdm['velocities/mach']:.2f}, "
             f"dynamic pressure {fdm['aero/qbar-psf']:.0f} psf")
     failed = [a for a in axes if not a.passed]
@@ -274,7 +278,9 @@ def _jsbsim_failure(ac: Aircraft, jsb_error: str, axes: tuple[TrimAxisReport, ..
         f"{a.state} = {a.state_value:.3g} {unit.get(a.state, 'rad/s^2')} (tolerance {a.tolerance:g}) with "
         f"{a.control.lower()} {a.control_value:g}{' deg' if a.control in _ANGLE_CONTROLS else ''}" for a in failed)
     hint = "".join(f"; {_AXIS_HINTS[a.state]}" for a in failed[:1] if a.state in _AXIS_HINTS)
-    return f"JSBSim's trim reported {jsb_error!r}: not trimmed: {parts} (its last iterate){hint}; {cond}"
+    # e.g. "Sorry, wdot doesn't appear to be trimmable": the axis with no sign change over its control range
+    sorry = "".join(f" ({ln.strip()})" for ln in report.splitlines() if ln.strip().startswith("Sorry,"))
+    return f"JSBSim's trim reported {jsb_error!r}{sorry}: not trimmed: {parts} (its last iterate){hint}; {cond}"
 
 
 _ANGLE_CONTROLS = {"Angle of Attack", "Roll Angle", "Beta", "Flight Path Angle", "Heading", "Theta"}
@@ -283,6 +289,43 @@ _AXIS_HINTS = {
     "udot": "thrust and drag do not balance (too fast, too slow or too high for the engine)",
     "qdot": "the pitch trim cannot balance the pitching moment",
 }
+
+
+def _flush_c_stdout() -> None:
+    """``fflush(NULL)``: JSBSim writes through C stdio, whose buffer Python's ``sys.stdout.flush`` does not touch."""
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # no C library to load by name (Windows): unbuffered enough there
+        pass
+
+
+class _LogCollector(getattr(jsbsim, "FGLogger", object)):  # type: ignore[misc]
+    """A JSBSim logger that keeps the text of every record."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.parts: list[str] = []
+
+    def message(self, message: str) -> None:
+        self.parts.append(message)
+
+
+@contextlib.contextmanager
+def _captured_jsbsim_log():
+    """Route JSBSim's log (this thread) to a collector for the duration; the text is in ``.text`` after."""
+    cap = _Captured()
+    if not hasattr(jsbsim, "set_logger"):  # older wheels print to C stdout: _captured_stdout has it
+        yield cap
+        return
+    previous = jsbsim.get_logger()
+    collector = _LogCollector()
+    jsbsim.set_logger(collector)
+    cap.active = True
+    try:
+        yield cap
+    finally:
+        jsbsim.set_logger(previous)
+        cap.text = "".join(collector.parts)
 
 
 class _Captured:
@@ -309,6 +352,7 @@ def _captured_stdout():
             cap.active = True
             yield cap
         finally:
+            _flush_c_stdout()  # stdout to a file or pipe is block-buffered in libc: empty it into buf, not later
             os.dup2(saved, 1)
             os.close(saved)
             buf.seek(0)
