@@ -8,7 +8,12 @@ Table of contents
 - :func:`read_log` -> :class:`FlightLog` (``reader.py``): ``topics[topic]`` is a
   :class:`VectorTopic` (numpy column per field), an :class:`EventTopic` (``(t_s, dict)`` events)
   or a :class:`RawTopic`; :func:`log_info` -> :class:`LogInfo` from the summary alone.
-- :func:`repair_log` -> :class:`RepairReport` (``repair.py``): rebuild a file cut off by a crash.
+- :func:`repair_log` -> :class:`RepairReport` (``repair.py``): rebuild a file cut off by a crash
+  or damaged, taking each schema and channel from its intact copy.
+- :func:`verify_log` -> :class:`VerifyReport` (``verify.py``): every CRC and index checked, each
+  damaged part named (:class:`Problem`).
+- ``framing.py``: strict record parsing, a record scan that resynchronises after damage, CRC32
+  single-byte error location (shared by verify and repair).
 - ``schemas.py``: topic names, schema validation, CDR layout, standard event JSON Schemas.
 - ``records.py``: MCAP framing, Message records and chunks laid out with numpy, chunk parsing
   (shared by the writer, the reader and repair).
@@ -54,6 +59,7 @@ from fdi_sim.flightlog.schemas import (
     fdi_topic,
     vector_schema,
 )
+from fdi_sim.flightlog.verify import Problem, VerifyReport, verify_log
 from fdi_sim.flightlog.writer import EventChannel, FlightLogWriter, VectorChannel
 
 __all__ = [
@@ -63,7 +69,7 @@ __all__ = [
     "TOPIC_SENSORS", "TOPIC_SENSORS_VALID", "TOPIC_SIM_STATUS", "TOPIC_SURFACES",
     "TOPIC_TRUTH_STATE",
     "Event", "EventChannel", "EventSchema", "EventTopic", "FlightLog", "FlightLogWriter", "LogInfo",
-    "RawTopic", "RepairReport", "TopicData", "TopicInfo", "VectorChannel", "VectorSchema",
-    "VectorTopic",
-    "event_schema", "fdi_topic", "log_info", "read_log", "repair_log", "vector_schema",
+    "Problem", "RawTopic", "RepairReport", "TopicData", "TopicInfo", "VectorChannel", "VectorSchema",
+    "VectorTopic", "VerifyReport",
+    "event_schema", "fdi_topic", "log_info", "read_log", "repair_log", "vector_schema", "verify_log",
 ]

@@ -346,7 +346,11 @@ def _reframe(data: bytes | memoryview, start: int, stop: int, allowed: frozenset
             found.append(Span(op, start, stop, parse_body(op, body, start + RECORD_HEAD_BYTES), reframed=True))
         except (ValueError, struct.error):
             pass
-    return found[0] if len(found) == 1 else None
+    # any 22 bytes or more read as a Message: it counts only if nothing else fits
+    strict = [f for f in found if f.opcode != Opcode.MESSAGE]
+    if strict:
+        return strict[0] if len(strict) == 1 else None
+    return found[0] if found else None
 
 
 def scan_section(data: bytes | memoryview, start: int, end: int, allowed: frozenset[int],

@@ -192,7 +192,8 @@ class _Verifier:
         self.sum_spans: list[Span] = []
         self.sum_gaps: list[Gap] = []
         self.groups: list[tuple[int, int, int]] = []
-        self._expected: list[tuple[int, int, str]] = []
+        self._expected: list[tuple[int, int, Any]] = []
+        self.offset_start: int | None = None
         self.data_crc: tuple[int, int] | None = None  # (stored, computed)
         self.summary_crc: tuple[int, int] | None = None
         self.parts: list[tuple[int, int, str]] = []  # (start, end, part) for CRC location
@@ -284,10 +285,22 @@ class _Verifier:
             self.parts.append((0, spans[0].end, "header"))
             if spans[0].record is None:
                 self.add("header", f"does not parse ({spans[0].error})", start)
+            elif spans[0].reframed:
+                self.add("header", "its opcode or length field is damaged (its body reads as a Header "
+                         "between the magic and the next intact record)", start)
         chunk: _Chunk | None = None
+        expected_at = {e[0]: e for e in self._expected} if self.summary_crc_ok is not False else {}
         for s in spans[1:] if spans and spans[0].opcode == Opcode.HEADER else spans:
             if s.opcode != Opcode.MESSAGE_INDEX:
                 chunk = None
+            exp = expected_at.get(s.start)
+            if exp is not None and exp[1] != s.opcode:
+                # the summary indexes another record here: its opcode byte is the damaged one
+                part = self._expected_part(*exp)
+                self.parts.append((s.start, s.end, part))
+                self.add(part, f"the summary indexes a {opcode_name(exp[1])} record at offset {s.start}; "
+                         f"the record there has opcode {opcode_name(s.opcode)}", s.start)
+                continue
             if s.opcode == Opcode.HEADER:
                 self.add("header", f"a second Header record at offset {s.start}", s.start)
             elif s.opcode == Opcode.SCHEMA:
@@ -314,7 +327,7 @@ class _Verifier:
             else:
                 self.parts.append((s.start, s.end, f"{opcode_name(s.opcode)} record at offset {s.start}"))
             if s.reframed:
-                self.add(self._part_of(s), "the record's opcode or length field is damaged (its body "
+                self.add(self.part_at(s.start), "the record's opcode or length field is damaged (its body "
                          "reads as this record between two intact ones)", s.start)
         for g in gaps:
             self._gap(g, "data section")
@@ -464,7 +477,7 @@ class _Verifier:
                      f"{cid} (log time, offset)", s.start)
 
     def _gap(self, g: Gap, section: str) -> None:
-        expected = [p for (a, _b, p) in self.expected_parts() if g.start <= a < g.end]
+        expected = [self._expected_part(*e) for e in self._expected if g.start <= e[0] < g.end]
         op = self.data[g.start]
         if expected:
             part = expected[0]
@@ -474,9 +487,6 @@ class _Verifier:
             part = f"{section} at offset {g.start}"
         self.parts.append((g.start, g.end, part))
         self.add(part, f"{g.reason}; bytes {g.start}..{g.end} hold no readable record", g.start)
-
-    def expected_parts(self) -> list[tuple[int, int, str]]:
-        return getattr(self, "_expected", [])
 
     def _check_data_crc(self, data_end: int) -> None:
         self.parts.append((data_end, data_end + _DATA_END_BYTES, "data section (Data End record)"))
@@ -524,20 +534,31 @@ class _Verifier:
         """Read the summary's records (before the data section, whose damage they help name)."""
         spans, gaps, _ = scan_section(self.data, start, footer_pos, SUMMARY_OPCODES)
         self.sum_spans, self.sum_gaps = spans, gaps
+        (off,) = struct.unpack_from("<Q", self.data, footer_pos + RECORD_HEAD_BYTES + 8)
+        firsts = [s.start for s in spans if s.opcode == Opcode.SUMMARY_OFFSET and s.record is not None]
+        self.offset_start = off if start < off < footer_pos else (firsts[0] if firsts else None)
         self.groups = [(s.record.group_opcode, s.record.group_start, s.record.group_start + s.record.group_length)
                        for s in spans if s.opcode == Opcode.SUMMARY_OFFSET and s.record is not None]
+        # what the summary's indexes say starts where: (offset, opcode, index record)
         exp = self._expected = []
         for s in spans:
             r = s.record
             if s.opcode == Opcode.CHUNK_INDEX and r is not None:
-                exp.append((r.chunk_start_offset, r.chunk_start_offset + r.chunk_length,
-                            f"chunk at offset {r.chunk_start_offset} (t_s {r.message_start_time / NS_PER_S:.3f}.."
-                            f"{r.message_end_time / NS_PER_S:.3f})"))
+                exp.append((r.chunk_start_offset, Opcode.CHUNK, r))
                 for cid, off in r.message_index_offsets.items():
-                    exp.append((off, off + 1, f"message index at offset {off} (channel {cid}) of the chunk "
-                                f"at offset {r.chunk_start_offset}"))
+                    exp.append((off, Opcode.MESSAGE_INDEX, (cid, r.chunk_start_offset)))
             elif s.opcode == Opcode.METADATA_INDEX and r is not None:
-                exp.append((r.offset, r.offset + r.length, f"metadata record '{r.name}'"))
+                exp.append((r.offset, Opcode.METADATA, r))
+
+    def _expected_part(self, offset: int, opcode: int, what: Any) -> str:
+        """The name of the record the summary indexes at ``offset``."""
+        if opcode == Opcode.CHUNK:
+            return (f"chunk at offset {offset} (t_s {what.message_start_time / NS_PER_S:.3f}.."
+                    f"{what.message_end_time / NS_PER_S:.3f})")
+        if opcode == Opcode.MESSAGE_INDEX:
+            return (f"message index at offset {offset} (channel {what[0]} {self.topics.get(what[0], '?')}) "
+                    f"of the chunk at offset {what[1]}")
+        return f"metadata record '{what.name}'"
 
     def _group_at(self, offset: int) -> int | None:
         for op, a, b in self.groups:
@@ -549,6 +570,8 @@ class _Verifier:
         """Name a summary record by the group the summary offsets put it in (its own opcode
         may be the damaged byte), then by its fields."""
         op = s.opcode if s.record is not None else (self._group_at(s.start) or s.opcode)
+        if s.record is None and self.offset_start is not None and s.start >= self.offset_start:
+            op = Opcode.SUMMARY_OFFSET  # the footer says the summary offsets are here
         r = s.record if s.opcode == op else None
         if op in (Opcode.SCHEMA, Opcode.CHANNEL):
             return self._part_of(Span(op, s.start, s.end, r), "summary")
@@ -588,6 +611,8 @@ class _Verifier:
         self.summary_named: list[tuple[Span, str]] = []
         for s in self.sum_spans:
             op = s.opcode if s.record is not None else (self._group_at(s.start) or s.opcode)
+            if s.record is None and self.offset_start is not None and s.start >= self.offset_start:
+                op = Opcode.SUMMARY_OFFSET
             k = ordinals[op] = ordinals.get(op, -1) + 1
             part = self._summary_part(s, k)
             self.summary_named.append((s, part))
