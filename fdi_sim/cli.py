@@ -1,7 +1,7 @@
-"""``fdi-sim``: run | scenarios | plugins | info | repair | linearize.
+"""``fdi-sim``: run | scenarios | plugins | info | verify | repair | linearize.
 
-Exit codes: 0 success, 1 a run that diverged or was interrupted, 2 bad input (one paragraph, no
-traceback).
+Exit codes: 0 success, 1 a run that diverged or was interrupted (or a log that `verify` finds
+damaged), 2 bad input (one paragraph, no traceback).
 """
 from __future__ import annotations
 
@@ -67,8 +67,18 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
 def _cmd_info(args: argparse.Namespace) -> int:
     from fdi_sim.flightlog import log_info
 
+    if args.check:
+        return _cmd_verify(args)
     print(log_info(args.log).format())
     return 0
+
+
+def _cmd_verify(args: argparse.Namespace) -> int:
+    from fdi_sim.flightlog import verify_log
+
+    rep = verify_log(args.log)
+    print(rep.format())
+    return 0 if rep.ok else 1
 
 
 def _cmd_repair(args: argparse.Namespace) -> int:
@@ -97,7 +107,11 @@ def build_parser() -> argparse.ArgumentParser:
     pl.set_defaults(func=_cmd_plugins)
     i = sub.add_parser("info", help="summarize an MCAP log")
     i.add_argument("log")
+    i.add_argument("--check", action="store_true", help="verify every CRC and index first (as `fdi-sim verify`)")
     i.set_defaults(func=_cmd_info)
+    v = sub.add_parser("verify", help="check every CRC and index of a log; name what is damaged (exit 1 if so)")
+    v.add_argument("log")
+    v.set_defaults(func=_cmd_verify)
     rp = sub.add_parser("repair", help="rebuild a log cut off by a crash")
     rp.add_argument("log")
     rp.add_argument("--out", default=None, help="repaired file (default: <stem>.repaired.mcap)")

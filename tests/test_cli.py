@@ -156,3 +156,24 @@ def test_info_lists_the_fault_catalogue(tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["info", str(log)]) == 0
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("fault:")]
     assert len(lines) == 1 and lines[0].split()[2:] == ["sensor-drift-v1", "on", "vc_kts,", "from", "10", "s"], lines
+
+
+def test_verify_names_damage_and_exit_codes(tmp_path: Path, f16_text: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """`fdi-sim verify`: 0 intact, 1 damaged (the part named), 2 not an MCAP file; `info --check` the same."""
+    scn = tmp_path / "s.toml"
+    scn.write_text(f16_text.replace("duration_s = 10.0", "duration_s = 3.0"))
+    log = tmp_path / "x.mcap"
+    assert main(["run", str(scn), "--log", str(log), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["verify", str(log)]) == 0
+    assert "intact" in capsys.readouterr().out
+    data = bytearray(log.read_bytes())
+    data[len(data) // 3] ^= 0x01  # inside a chunk
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    assert main(["verify", str(bad)]) == 1
+    out = capsys.readouterr().out
+    assert "DAMAGED" in out and "chunk at offset" in out and "fdi-sim repair" in out
+    assert main(["info", "--check", str(bad)]) == 1
+    assert main(["verify", str(scn)]) == 2
+    assert "not an MCAP file" in capsys.readouterr().err

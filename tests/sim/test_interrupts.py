@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from fdi_sim.flightlog import read_log
+from fdi_sim.flightlog import read_log, verify_log
 
 REPO = Path(__file__).resolve().parents[2]
 N_DEFAULT = 4
@@ -74,6 +74,8 @@ def _check_interrupted_log(log: Path, stdout: str, stderr: str, rc: int) -> dict
         stats = reader.get_summary().statistics
         count = sum(1 for _ in reader.iter_messages())
     assert count == stats.message_count
+    rep = verify_log(log)  # and every other CRC (Data End, summary) and index
+    assert rep.ok, rep.format()
     return {"t_s": float(truth.t_s[-1]), "rows": n}
 
 
