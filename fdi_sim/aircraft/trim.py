@@ -160,7 +160,8 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
         acc = _tiny_step_accelerations(ac) / _ACC_W  # at the best point (the state is left there)
         worst = np.argsort(-np.abs(acc * _ACC_W))[:2]
         left = ", ".join(f"{_ACC_NAMES[i]} = {acc[i]:.3g} {_ACC_UNITS[i]}" for i in worst)
-        method = "the running-engine trim" if result.method == "running" else "the check after JSBSim's trim"
+        method = ("the running-engine trim stopped at" if result.method == "running"
+                  else "JSBSim's trim passed, but a tiny real step after it shows")
         jsb = f"JSBSim's own trim: {jsb_error}" if jsb_error else "JSBSim's own trim passed"
         if limit:
             why, fix = f"best point: {limit}", limit_fix
@@ -170,7 +171,7 @@ def trim(ac: Aircraft, op: OperatingPoint) -> TrimResult:
                    f"pitch_trim_cmd_norm {result.pitch_trim_cmd_norm:.3f}")
             fix = _envelope_fix(ac, op)
         raise TrimError(ac.name, point,
-                        f"{method} stopped at residual {result.residual:.3g} (weighted body accelerations; accepted "
+                        f"{method} residual {result.residual:.3g} (weighted body accelerations; accepted "
                         f"below {TRIM_TOL}; largest: {left}; {jsb}); {why}", fix)
     if limit:
         raise TrimError(ac.name, point, limit, limit_fix)
@@ -523,5 +524,5 @@ def _at_limit(t: TrimResult) -> tuple[str, str]:
     if t.op.aircraft == "f16" and t.throttle_cmd_norm > F16_AFTERBURNER_THROTTLE_NORM + _AT_STOP:
         return (f"throttle_cmd_norm = {t.throttle_cmd_norm:.3f} is above {F16_AFTERBURNER_THROTTLE_NORM:g}, the "
                 "afterburner detent (range [0, 1]): the point needs afterburner thrust, which is not a cruise trim",
-                "fly slower (initial.vt_kts / vc_kts; the F-16 trims up to 600 KCAS and Mach 0.72) or higher (initial.h_ft)")
+                "fly slower (initial.vt_kts / vc_kts) or higher (initial.h_ft); aircraft/f16/grid.toml gives the trim envelope")
     return "", ""
