@@ -121,7 +121,10 @@ def make_pca(
     """
     u0, y0 = model.u0[model.control_columns()], model.y0
     nr = window_L * model.n_outputs - model.n_states if n_residuals is None else int(n_residuals)
-    pca = pca_train(series_windows(train_u, train_y, window_L, u0, y0), nr)
+    u_names = [model.input_names[i] for i in model.control_columns()]
+    names = [f"{n}[k-{window_L - 1 - j}]" for sig in (model.output_names, u_names) for j in range(window_L) for n in sig]
+    # exact relations in the log (a command held at 0, the autopilot's u = K y) are dropped, see pca_train
+    pca = pca_train(series_windows(train_u, train_y, window_L, u0, y0), nr, column_names=names)
     names = tuple(fault_data or ())
     sig = estimate_fault_signatures(
         pca, [series_windows(*fault_data[name], window_L, u0, y0) for name in names]) if names else None

@@ -9,10 +9,11 @@ each fault (eq. 21-22). ``W'`` plays the role of ``W'[I, -H_u]`` of the parity s
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+import scipy.linalg as sla
 from numpy.typing import NDArray
 
 from fdi_sim.detectors.window_detector import WindowParityDetector
@@ -21,7 +22,9 @@ from fdi_sim.linear.model import LinearModel
 
 __all__ = [
     "PcaModel",
+    "EXACT_RTOL",
     "estimate_fault_signatures",
+    "exact_relations",
     "make_pca_detector",
     "pca_train",
     "pca_train_from_series",
@@ -68,6 +71,13 @@ class PcaModel:
         (n_r,) the residual eigenvalues.
     n_samples : int
         N, the number of training windows.
+    exact_relations : NDArray
+        (d, k) orthonormal directions ``v`` with ``v' Z_t = 0`` in every training window (to
+        :data:`EXACT_RTOL`): identically zero columns and exact linear relations, e.g. those the
+        autopilot makes between commands and measurements. They are excluded from both spaces
+        (``W' v = 0``); ``eigenvalues`` are those of ``R_Z`` on their orthogonal complement.
+    notes : tuple of str
+        Why each exact relation was dropped (column names where given).
     """
 
     eigenvalues: NDArray[np.float64]
@@ -75,6 +85,8 @@ class PcaModel:
     W: NDArray[np.float64]
     D_r: NDArray[np.float64]
     n_samples: int
+    exact_relations: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
+    notes: tuple[str, ...] = ()
 
     @property
     def n_residuals(self) -> int:
@@ -94,45 +106,121 @@ class PcaModel:
         return Z @ self.basis_model @ self.basis_model.T, Z @ self.W @ self.W.T
 
 
-def pca_train(Z: NDArray, n_residuals: int) -> PcaModel:
+#: an exact relation: a direction whose singular value in the unit-rms training data is at most
+#: this (the relation holds to 1 ppm of the signals' rms). A relation made in software (an
+#: autopilot's u = K y, a command held at 0) holds to rounding, 1e-16 in float64 and 6e-8 when a
+#: log stores float32; a relation of the plant seen through sensors is blurred by their noise,
+#: at least 1e-4 of a signal's rms (F-16 gyro noise 0.0014 rad/s against rates of 0.01-0.1 rad/s).
+EXACT_RTOL = 1e-6
+
+
+def exact_relations(Z: NDArray, column_names: Sequence[str] | None = None, rtol: float = EXACT_RTOL
+                    ) -> tuple[NDArray[np.float64], tuple[str, ...]]:
+    """Directions ``v`` with ``Z v = 0`` to ``rtol``: zero columns and exact linear relations.
+
+    Parameters
+    ----------
+    Z : NDArray
+        (N, d) data windows.
+    column_names : sequence of str, optional
+        Names of the d columns, for the notes.
+    rtol : float
+        Relative singular value below which a direction of the unit-rms data is exact.
+
+    Returns
+    -------
+    basis : NDArray
+        (d, k) orthonormal basis of the exact relations (k may be 0).
+    notes : tuple of str
+        One line per kind of relation found.
+    """
+    Z = np.atleast_2d(np.asarray(Z, float))
+    N, d = Z.shape
+    names = list(column_names) if column_names is not None else [f"z[{j}]" for j in range(d)]
+    rms = np.sqrt(np.mean(Z**2, axis=0))
+    zero = rms <= 0.0
+    notes: list[str] = []
+    dirs = [np.eye(d)[:, j] for j in np.flatnonzero(zero)]
+    if zero.any():
+        notes.append(f"{int(zero.sum())} column(s) identically zero: {', '.join(names[j] for j in np.flatnonzero(zero))}")
+    keep = np.flatnonzero(~zero)
+    if keep.size:
+        # SVD of the unit-rms columns: the relative size of a singular value no longer depends on units
+        _, sv, Vt = np.linalg.svd(Z[:, keep] / (rms[keep] * np.sqrt(N)), full_matrices=False)
+        small = np.flatnonzero(sv <= rtol * sv[0])
+        for i in small:
+            v = np.zeros(d)
+            v[keep] = Vt[i] / rms[keep]  # v' z = 0 in the original units
+            dirs.append(v)
+        if small.size:
+            v = Vt[small[-1]]
+            top = np.argsort(-np.abs(v))[:4]
+            notes.append(
+                f"{small.size} exact linear relation(s) among the columns (singular value <= {rtol:g} of the unit-rms "
+                f"data, smallest {sv[small[-1]] / sv[0]:.1e}), e.g. "
+                + " ".join(f"{v[j]:+.3f}*{names[keep[j]]}/rms" for j in top)
+            )
+    basis = sla.orth(np.column_stack(dirs)) if dirs else np.zeros((d, 0))
+    return basis, tuple(notes)
+
+
+def pca_train(Z: NDArray, n_residuals: int, column_names: Sequence[str] | None = None,
+              exact_rtol: float = EXACT_RTOL) -> PcaModel:
     """Eigen-decomposition of the fault-free data correlation and the model/residual split.
 
     ``R_Z = 1/N sum_t Z_t Z_t'`` (eq. 16; the paper's N - L counts the windows, here N is the
     number of rows). Computed as the SVD of ``Z / sqrt(N)``, whose squared singular values are the
     eigenvalues of ``R_Z``.
 
+    Exact relations in the data (:func:`exact_relations`: a command identically zero, an
+    autopilot's exact ``u = K y``) are dropped before the split, with the reason recorded in
+    ``PcaModel.notes``; they are not regularised. Such a relation is made by software, holds also
+    when the aircraft has a fault (the autopilot still computes its law), so as a residual it is
+    blind, and its eigenvalue is rounding: normalizing by it (eq. 20) would turn float rounding
+    into alarms. The split is made on the orthogonal complement of the relations.
+
     Parameters
     ----------
     Z : NDArray
         (N, d) fault-free data windows (rows ``Z_t'``), see :func:`stack_data_windows`.
     n_residuals : int
-        n_r, the number of smallest eigenvalues assigned to the residual (eq. 17).
+        n_r, the number of smallest eigenvalues assigned to the residual (eq. 17), at most
+        ``d - k - 1`` with k exact relations.
+    column_names : sequence of str, optional
+        Names of the d columns (for the notes).
+    exact_rtol : float
+        Tolerance of :func:`exact_relations`.
 
     Raises
     ------
     DesignError
-        n_r outside 1..d-1, fewer windows than dimensions, or a zero residual eigenvalue
-        (exactly collinear data: the normalization of eq. 20 would divide by zero).
+        n_r outside 1..d-k-1, fewer windows than dimensions, non-finite data, or a residual
+        eigenvalue that is still zero after the exact relations are dropped.
     """
     Z = np.atleast_2d(np.asarray(Z, float))
     N, d = Z.shape
-    if not 1 <= int(n_residuals) < d:
-        raise DesignError(f"n_residuals must be between 1 and {d - 1} for {d}-dimensional data, got {n_residuals}")
     if N < d:
         raise DesignError(f"{N} training windows cannot estimate a {d}x{d} covariance; use at least {d} (many more in practice)")
     if not np.all(np.isfinite(Z)):
         raise DesignError("training data contain NaN or inf")
-    _, sv, Vt = np.linalg.svd(Z / np.sqrt(N), full_matrices=False)
-    ev = sv**2  # eigenvalues of R_Z = Z'Z/N, descending
+    Nx, notes = exact_relations(Z, column_names, exact_rtol)
+    k = Nx.shape[1]
     nr = int(n_residuals)
-    D_r = ev[d - nr:]
+    if not 1 <= nr < d - k:
+        extra = f" after dropping {k} exact relation(s) ({'; '.join(notes)})" if k else ""
+        raise DesignError(f"n_residuals must be between 1 and {d - k - 1} for {d}-dimensional data{extra}, got {n_residuals}")
+    Q = np.eye(d) if k == 0 else sla.null_space(Nx.T)  # orthonormal complement of the exact relations
+    _, sv, Vt = np.linalg.svd(Z @ Q / np.sqrt(N), full_matrices=False)
+    ev = sv**2  # eigenvalues of R_Z = Z'Z/N (on the complement), descending
+    D_r = ev[ev.size - nr:]
     if D_r[-1] <= 1e-14 * ev[0]:
         raise DesignError(
-            f"the smallest residual eigenvalue is {D_r[-1]:.3g} (relative {D_r[-1] / ev[0]:.1e}): the training "
-            "data are exactly collinear (no noise), so eq. 20 cannot normalize. Use noisy data or fewer residuals."
+            f"the smallest residual eigenvalue is {D_r[-1]:.3g} (relative {D_r[-1] / ev[0]:.1e}) even after dropping "
+            f"{k} exact relation(s): eq. 20 cannot normalize. Use noisy data or fewer residuals."
         )
-    V = Vt.T
-    return PcaModel(eigenvalues=ev, basis_model=V[:, : d - nr], W=V[:, d - nr:], D_r=D_r, n_samples=N)
+    V = Q @ Vt.T
+    return PcaModel(eigenvalues=ev, basis_model=V[:, : ev.size - nr], W=V[:, ev.size - nr:], D_r=D_r, n_samples=N,
+                    exact_relations=Nx, notes=notes)
 
 
 def series_windows(

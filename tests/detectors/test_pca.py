@@ -121,8 +121,16 @@ def test_bad_training_input():
         pca_train(Z, 6)
     with pytest.raises(DesignError, match="at least 6"):
         pca_train(Z[:4], 2)
+    # exactly collinear columns (three copies of the sum of the first three: 3 exact relations) are
+    # dropped with a note, not refused (issue 12: the autopilot makes such relations); asking for
+    # more residuals than the 6 - 3 - 1 left raises and names them
     collinear = np.hstack([Z[:, :3], Z[:, :3] @ np.ones((3, 3))])
-    with pytest.raises(DesignError, match="collinear"):
+    pca = pca_train(collinear, 2)
+    assert pca.exact_relations.shape == (6, 3) and "3 exact linear relation" in pca.notes[0]
+    assert np.abs(collinear @ pca.exact_relations).max() < 1e-12 * np.abs(collinear).max()
+    assert np.abs(pca.W.T @ pca.exact_relations).max() < 1e-12  # no residual along a relation
+    assert pca.D_r.min() > 0.01  # the normalization of eq. 20 divides by real variances only
+    with pytest.raises(DesignError, match="after dropping 3 exact"):
         pca_train(collinear, 3)
     with pytest.raises(DesignError, match="at least L=3"):
         sliding_windows(np.ones((2, 3)), 3)
