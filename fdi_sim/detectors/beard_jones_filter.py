@@ -9,14 +9,14 @@ filter, and :class:`BeardJonesFilter` / :class:`BeardJonesBank` run them.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.detectors.base import Residual
+from fdi_sim.detectors.base import Residual, finite_or_invalid
 from fdi_sim.detectors.beard_jones import BeardJonesDesign, beard_jones_gain, detection_space
 from fdi_sim.detectors.directional_observer import DirectionalObserver, DiscreteObserver
 from fdi_sim.detectors.kalman import observer_residual_covariance
@@ -225,4 +225,7 @@ class BeardJonesBank:
         ratio = float(self._ratios[j])
         alarm = ratio > 1.0
         iso = self.filters[j].isolate(scores[self._slices[j][1]]) if alarm else None
-        return Residual(t_s, r, ratio, 0, 1.0, alarm, iso, scores)
+        res = Residual(t_s, r, ratio, 0, 1.0, alarm, iso, scores)
+        # one diverged filter makes its ratio NaN/inf: the bank's step is invalid (checked over all ratios and r)
+        return res if np.isfinite(self._ratios).all() else replace(finite_or_invalid(res), alarm=False, isolation=None,
+                                                                    valid=False)

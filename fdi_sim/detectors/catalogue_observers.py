@@ -71,7 +71,7 @@ def make_beard_jones(model: LinearModel, faults: Sequence[str] | None = None, de
     return filters[0] if len(filters) == 1 else BeardJonesBank(filters)
 
 
-def make_lmi_detection(model: LinearModel, fault: str | None = None, h_radps: float = 20.0, epsilon: float = 1e-7,
+def make_lmi_detection(model: LinearModel, fault: str | None = None, h_radps: float = 100.0, epsilon: float = 1e-7,
                        method: str = "least-squares", dt_s: float | None = None, sensor_std: Any = None,
                        alpha: float = 1e-3) -> LmiDetectionFilter:
     """LMI-optimal detection filter (continuous design, ZOH runtime) for one actuator fault."""

@@ -15,11 +15,13 @@ fault's output direction (the patent's phi_e, Miller & Ribbens App. A, seed
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.decision.chi2 import chi2_threshold
-from fdi_sim.detectors.base import Residual
+from fdi_sim.detectors.base import Residual, finite_or_invalid
 
 Array = NDArray[np.float64]
 
@@ -123,7 +125,9 @@ class DirectionalObserver:
         r, scores = np.empty(self._m), np.empty(len(self.hypotheses))
         stat = self.advance(u, y, r, scores)
         alarm = stat > self.threshold
-        return Residual(t_s, r, stat, self._m, self.threshold, alarm, self.isolate(scores) if alarm else None, scores)
+        res = Residual(t_s, r, stat, self._m, self.threshold, alarm, self.isolate(scores) if alarm else None, scores)
+        # stat = |W r|^2 is finite iff r is: a diverged observer is reported invalid, not "no alarm"
+        return res if math.isfinite(stat) else finite_or_invalid(res)
 
     def advance(self, u: NDArray, y: NDArray, r: Array, scores: Array) -> float:
         """Filter one sample, writing the residual into ``r`` and the angles [rad] into ``scores``.

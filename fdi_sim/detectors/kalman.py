@@ -20,7 +20,8 @@ detecting icing (claims 18, 36).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from typing import Literal, Sequence
 
 import numpy as np
@@ -29,7 +30,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from fdi_sim.decision.chi2 import chi2_threshold
-from fdi_sim.detectors.base import Residual
+from fdi_sim.detectors.base import Residual, finite_or_invalid
 from fdi_sim.detectors.directional_observer import DiscreteObserver
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
@@ -305,7 +306,9 @@ class KalmanInnovationDetector:
             Z = self._window()
             valid = Z is not None
             stat = 0.0 if Z is None else _bias_statistic(Z) if self.test == "bias" else _whiteness_statistic(Z, self.n_lags)
-        return Residual(float(t_s), self.innovation, stat, self._dof, self.threshold, valid and stat > self.threshold, None, None, valid)
+        res = Residual(float(t_s), self.innovation, stat, self._dof, self.threshold, valid and stat > self.threshold, None, None, valid)
+        # a diverged state gives a NaN/inf statistic (stat = |W nu|^2 or a window of them): never a valid "no alarm"
+        return res if math.isfinite(stat) else finite_or_invalid(res)
 
     def window_tests(self) -> tuple[WindowTest, WindowTest] | None:
         """Bias and whiteness tests on the current window, or None until it is full."""
@@ -374,7 +377,7 @@ class TimeVaryingKalmanDetector:
         self.P = self._A @ Pu @ self._A.T + self.Qd
         self.S = S
         stat = float(nu @ np.linalg.solve(S, nu))
-        return Residual(float(t_s), nu, stat, len(nu), self.threshold, stat > self.threshold)
+        return finite_or_invalid(Residual(float(t_s), nu, stat, len(nu), self.threshold, stat > self.threshold))
 
 
 class MultipleModelBank:
@@ -435,8 +438,11 @@ class MultipleModelBank:
         j = int(self._others[np.argmax(p[self._others])])
         stat = float(p[j])
         alarm = stat > self.threshold
-        return Residual(float(t_s), self.filters[best].innovation, stat, 0, self.threshold, alarm,
-                        self.hypotheses[j] if alarm else None, p)
+        res = Residual(float(t_s), self.filters[best].innovation, stat, 0, self.threshold, alarm,
+                       self.hypotheses[j] if alarm else None, p)
+        # a diverged filter has NIS inf or NaN: its probability would drop to the floor (or NaN
+        # everything) and the bank would blame another model; the whole step is invalid instead
+        return res if np.isfinite(self._nis).all() else replace(res, alarm=False, isolation=None, valid=False)
 
 
 # ----------------------------------------------------------------------------- simulation helper

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.decision.chi2 import chi2_threshold
-from fdi_sim.detectors.base import Residual
+from fdi_sim.detectors.base import Residual, finite_or_invalid
 from fdi_sim.errors import DesignError, SimulationDiverged
 
 __all__ = [
@@ -178,15 +178,18 @@ class WindowParityDetector:
         self._count += 1
         rw = self._G @ window  # whitened residual
         sq = float(rw @ rw)
-        valid = self._count > self.order_s
-        stat = sq if valid else 0.0
+        full = self._count > self.order_s
+        stat = sq if full else 0.0
+        # finite inputs can still overflow (a mis-scaled model): a non-finite statistic is invalid
+        valid = full and math.isfinite(sq)
         alarm = valid and stat > self.threshold
         scores, isolation = None, None
         if self.hypotheses:
             scores = self._dirs @ rw  # cosines, turned into angles in place (the array is returned)
             isolation = self._isolate(scores, sq, alarm)
-        return Residual(t_s=float(t_s), r=rw, statistic=stat, dof=self.dof, threshold=self.threshold,
-                        alarm=bool(alarm), isolation=isolation, scores=scores, valid=valid)
+        res = Residual(t_s=float(t_s), r=rw, statistic=stat, dof=self.dof, threshold=self.threshold,
+                       alarm=bool(alarm), isolation=isolation, scores=scores, valid=valid)
+        return res if valid or not full else finite_or_invalid(res)  # stat = |rw|^2: finite iff rw is
 
     def _isolate(self, scores: NDArray, sq: float, alarm: bool) -> str | None:
         """Turn ``scores`` (the cosines ``dirs @ r``) into angles [rad] in place; on alarm return the
