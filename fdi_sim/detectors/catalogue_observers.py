@@ -77,9 +77,9 @@ def make_lmi_detection(model: LinearModel, fault: str | None = None, h_radps: fl
     """LMI-optimal detection filter (continuous design, ZOH runtime) for one actuator fault.
 
     ``h_radps`` bounds the closed-loop poles (``-h <= Re s < 0``). The default 100 rad/s is feasible at
-    every default-grid point of both aircraft with the sensor noise of their suites (the earlier
-    20 rad/s and 50 rad/s were infeasible on the F-16 everywhere, 20 on the DHC-6 at 18 of 30
-    points: with gyro noise of 0.0014 rad/s the LQ filter is fast); at the 120 Hz ZOH runtime
+    every default-grid point of both aircraft with the sensor noise of their suites (20 rad/s, the
+    earlier default, is infeasible at all 20 F-16 points and 18 of 30 DHC-6 points, 50 rad/s at the
+    F-16 points tried: with gyro noise of 0.0014 rad/s the LQ filter is fast); at the 120 Hz ZOH runtime
     100 rad/s is 0.83 rad per step, well inside the discrete stability region.
     """
     if model.is_discrete:
