@@ -158,15 +158,17 @@ def verify_log(path: str | Path) -> VerifyReport:
     if not looks_like_mcap(data):
         raise LogError(str(p), "not an MCAP file (neither end holds the MCAP magic bytes); "
                        "pass a flight log written by `fdi-sim run`")
-    v = scan_log(data)
+    v = scan_log(data, keep_records=False)
     return VerifyReport(p, len(data), tuple(v.problems), tuple(v.checks))
 
 
-def scan_log(data: bytes) -> _Verifier:
+def scan_log(data: bytes, *, keep_records: bool = True) -> _Verifier:
     """Run every check on the bytes of a log; the result also carries what was found
     (``data_spans``, ``sum_spans``, ``chunks`` with their decompressed records,
-    ``data_crc_ok``, ``summary_crc_ok``, ``problems``). Package-internal: used by repair."""
+    ``data_crc_ok``, ``summary_crc_ok``, ``problems``). Package-internal: used by repair.
+    ``keep_records=False`` drops each chunk's decompressed records once checked (memory)."""
     v = _Verifier(data)
+    v.keep_records = keep_records
     v.run()
     return v
 
@@ -178,6 +180,7 @@ class _Chunk:
     messages: dict[int, np.ndarray] = field(default_factory=dict)  # cid -> (n, 2) log, offset
     indexes: list[Span] = field(default_factory=list)  # the Message Index records after it
     part: str = ""
+    readable: bool = False  # decompressed, CRC and records checked (``records`` kept on request)
 
 
 class _Verifier(SummaryChecks):
@@ -185,6 +188,7 @@ class _Verifier(SummaryChecks):
 
     def __init__(self, data: bytes) -> None:
         self.data = data
+        self.keep_records = True
         self.problems: list[Problem] = []
         self.checks: list[str] = []
         self.topics: dict[int, str] = {}
@@ -404,8 +408,9 @@ class _Verifier(SummaryChecks):
 
     def _chunk_part(self, s: Span, cids: Any) -> str:
         head = s.record
-        if cids is None:
-            cids = []
+        if not cids:  # unreadable: the channels its chunk index lists
+            cids = [c for e in self._expected if e[0] == s.start and e[1] == Opcode.CHUNK
+                    for c in e[2].message_index_offsets]
         topics = [self.topics.get(c, f"channel {c}") for c in sorted(cids)]
         shown = ", ".join(topics[:_TOPICS_SHOWN]) + (f" +{len(topics) - _TOPICS_SHOWN} more"
                                                      if len(topics) > _TOPICS_SHOWN else "")
@@ -449,6 +454,9 @@ class _Verifier(SummaryChecks):
                            f"{head.message_end_time} ns, its messages span {min(logs)} / {max(logs)} ns")
         part = self._chunk_part(s, c.messages.keys())
         c.part = part
+        c.readable = c.records is not None
+        if not self.keep_records:
+            c.records = None
         self.parts.append((s.start, s.end, part))
         if problem:
             self.add(part, problem, s.start)
@@ -467,7 +475,7 @@ class _Verifier(SummaryChecks):
             self.add(part, "follows no chunk", s.start)
             return
         chunk.indexes.append(s)
-        if chunk.records is None:
+        if not chunk.readable:
             return
         want = chunk.messages.get(cid)
         got = rec.entries

@@ -202,7 +202,7 @@ class SummaryChecks:
 
     def _data_complete(self) -> bool:
         return (not self.data_gaps and all(s.record is not None for s in self.data_spans)
-                and all(c.records is not None for c in self.chunks))
+                and all(c.readable for c in self.chunks))
 
     def _check_statistics(self) -> None:
         stats = [(s, p) for s, p in self.summary_named if s.opcode == Opcode.STATISTICS and s.record is not None]
