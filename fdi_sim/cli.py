@@ -1,4 +1,4 @@
-"""``fdi-sim``: run | scenarios | plugins | info | verify | repair | linearize.
+"""``fdi-sim``: run | detect | scenarios | plugins | info | verify | repair | linearize.
 
 Exit codes: 0 success, 1 a run that diverged or was interrupted (or a log that `verify` finds
 damaged), 2 bad input (one paragraph, no traceback).
@@ -89,6 +89,15 @@ def _cmd_repair(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_detect(args: argparse.Namespace) -> int:
+    from fdi_sim.sim.detect import DEFAULT_RATE_HZ, detect_log, parse_detector_arg
+
+    specs = [parse_detector_arg(d) for d in (args.detector or [])]
+    rep, _ = detect_log(args.log, specs, rate_hz=args.rate_hz or DEFAULT_RATE_HZ, out=args.out)
+    print(rep.to_json() if args.json else rep.format())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fdi-sim", description="Aircraft fault detection and isolation testbed on JSBSim.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -112,6 +121,14 @@ def build_parser() -> argparse.ArgumentParser:
     v = sub.add_parser("verify", help="check every CRC and index of a log; name what is damaged (exit 1 if so)")
     v.add_argument("log")
     v.set_defaults(func=_cmd_verify)
+    d = sub.add_parser("detect", help="run registered detectors over a flight log (offline detection)")
+    d.add_argument("log")
+    d.add_argument("--detector", action="append", metavar="ID[:key=value,...]",
+                   help="a registered detector id with design options (repeatable; `fdi-sim plugins`)")
+    d.add_argument("--rate-hz", type=float, default=None, help="detector rate [Hz], dividing the log's rate (default 20)")
+    d.add_argument("--out", default=None, help="write the input's topics plus /fdi/... to this MCAP file")
+    d.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    d.set_defaults(func=_cmd_detect)
     rp = sub.add_parser("repair", help="rebuild a log cut off by a crash")
     rp.add_argument("log")
     rp.add_argument("--out", default=None, help="repaired file (default: <stem>.repaired.mcap)")

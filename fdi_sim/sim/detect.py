@@ -1,0 +1,355 @@
+"""Offline detection: registered detectors over any flight log (``fdi-sim detect``).
+
+For a log written by ``fdi-sim run``: the scenario text in its metadata gives the aircraft and
+the trim point; the linearizer trims and linearizes that point (JSBSim, a few seconds); each
+detector is designed from the model discretized at the detector rate and put in the standard
+form of the samples' time convention (:func:`fdi_sim.detectors.samples.paired_model`); the
+logged commands and measurements become samples by that convention
+(:func:`fdi_sim.detectors.samples.log_samples`); each detector steps through them. Per detector
+the report gives the samples, alarm samples and onsets, flight hours and, for each injected
+fault (the log's fault truth), the onset, the first alarm after it, the delay and the isolation.
+"""
+from __future__ import annotations
+
+import difflib
+import inspect
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fdi_sim import registry
+from fdi_sim.detectors.samples import Samples, log_samples, paired_model
+from fdi_sim.errors import DesignError, FdiSimError, LogError, ScenarioError
+from fdi_sim.flightlog import METADATA_SCENARIO, TOPIC_FAULT_EVENTS, fdi_topic, read_log
+from fdi_sim.flightlog.copy import NewEventTopic, NewVectorTopic, write_extended
+from fdi_sim.flightlog.reader import FlightLog
+from fdi_sim.flightlog.schemas import ALARM_JSON_SCHEMA, TOPIC_FDI_ALARMS
+
+DEFAULT_RATE_HZ = 20.0
+S_PER_H = 3600.0
+
+
+@dataclass(frozen=True)
+class DetectorSpec:
+    """A detector to run: registry id and design options."""
+
+    id: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+
+def parse_detector_arg(text: str) -> DetectorSpec:
+    """``ID[:key=value,...]``; values are JSON (numbers, true/false, lists, quoted strings) or bare words.
+
+    Raises
+    ------
+    ScenarioError
+        A malformed option.
+    """
+    ident, _, opts = text.partition(":")
+    params: dict[str, Any] = {}
+    if opts:
+        for item in _split_options(opts):
+            key, eq, raw = item.partition("=")
+            if not eq or not key.strip():
+                raise ScenarioError("--detector", text, f"option {item!r} is not key=value",
+                                    "write ID:key=value,key2=value2")
+            try:
+                params[key.strip()] = json.loads(raw)
+            except json.JSONDecodeError:
+                params[key.strip()] = raw.strip()
+    return DetectorSpec(ident.strip(), params)
+
+
+def _split_options(opts: str) -> list[str]:
+    """Split on commas outside brackets (``faults=["a","b"],alpha=0.01``)."""
+    out, depth, cur = [], 0, ""
+    for ch in opts:
+        depth += ch in "[{"
+        depth -= ch in "]}"
+        if ch == "," and depth == 0:
+            out.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    return out + ([cur] if cur else [])
+
+
+@dataclass(frozen=True, eq=False)
+class DetectorTrace:
+    """One detector over one log, at the detector rate."""
+
+    id: str
+    t_s: NDArray[np.float64]
+    statistic: NDArray[np.float64]
+    threshold: NDArray[np.float64]
+    alarm: NDArray[np.bool_]
+    valid: NDArray[np.bool_]
+    isolation: tuple[str | None, ...]
+    cost_us_per_sample: float
+
+
+@dataclass(frozen=True)
+class FaultOutcome:
+    """One injected fault as one detector saw it."""
+
+    label: str
+    target: str
+    type: str
+    t_onset_s: float
+    first_alarm_s: float | None
+    delay_s: float | None
+    isolated_as: str | None
+    isolation_correct: bool | None
+
+
+@dataclass(frozen=True)
+class DetectorOutcome:
+    """Counts for one detector over one log (``--json`` keys)."""
+
+    id: str
+    params: dict[str, Any]
+    samples: int
+    valid_samples: int
+    alarm_samples: int
+    alarm_fraction: float
+    alarm_onsets: int
+    flight_h: float
+    onsets_per_h: float
+    fault_free_samples: int
+    fault_free_alarm_samples: int
+    cost_us_per_sample: float
+    faults: tuple[FaultOutcome, ...]
+    error: str = ""
+
+
+@dataclass(frozen=True)
+class DetectReport:
+    """What ``fdi-sim detect`` prints."""
+
+    log_path: str
+    aircraft: str
+    rate_hz: float
+    detectors: tuple[DetectorOutcome, ...]
+    out_path: str | None = None
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=1, default=float)
+
+    def format(self) -> str:
+        lines = [f"log        {self.log_path} ({self.aircraft}, detectors at {self.rate_hz:g} Hz)"]
+        for d in self.detectors:
+            if d.error:
+                lines.append(f"{d.id:24} not designed: {d.error}")
+                continue
+            lines.append(f"{d.id:24} {d.samples} samples ({d.flight_h * 60:.1f} min), alarm on {d.alarm_samples} "
+                         f"({100 * d.alarm_fraction:.2f} %), {d.alarm_onsets} onsets ({d.onsets_per_h:.0f} /h); "
+                         f"valid {d.valid_samples}; fault-free {d.fault_free_alarm_samples}/{d.fault_free_samples}; "
+                         f"{d.cost_us_per_sample:.1f} us/sample")
+            for f in d.faults:
+                if f.first_alarm_s is None:
+                    lines.append(f"  {f.label:22} onset {f.t_onset_s:.2f} s: not detected")
+                else:
+                    iso = f"isolated as {f.isolated_as}" + ("" if f.isolation_correct is None else
+                                                            (" (right)" if f.isolation_correct else " (wrong)"))
+                    lines.append(f"  {f.label:22} onset {f.t_onset_s:.2f} s: first alarm {f.first_alarm_s:.2f} s, "
+                                 f"delay {f.delay_s:.2f} s, {iso if f.isolated_as else 'not isolated'}")
+        if self.out_path:
+            lines.append(f"out        {self.out_path}")
+        return "\n".join(lines)
+
+
+def fault_windows(log: FlightLog) -> list[dict[str, Any]]:
+    """The injected faults of a log: label, type, target and windows [s] (from ``/faults/events``)."""
+    t = log.topics.get(TOPIC_FAULT_EVENTS)
+    if t is None:
+        return []
+    for e in t.events:
+        if e.payload.get("event") == "catalog":
+            return [dict(f) for f in e.payload.get("faults", [])]
+    return []
+
+
+def model_for_log(log: FlightLog, rate_hz: float):
+    """Trim and linearize the log's initial point; the model at ``rate_hz`` in the samples' form.
+
+    Returns
+    -------
+    (LinearModel, str)
+        The paired discrete model and the aircraft id.
+    """
+    from fdi_sim.linear.grid import parse_grid_spec
+    from fdi_sim.linear.linearize import linearize_grid
+    from fdi_sim.scenario.loader import from_dict
+
+    meta = log.metadata.get(METADATA_SCENARIO)
+    if not meta or "json" not in meta:
+        raise LogError(str(log.path), "no 'scenario' metadata record: not a log written by `fdi-sim run`, so its "
+                       "aircraft and operating point are unknown")
+    sc = from_dict(json.loads(meta["json"]), source=f"{log.path} (scenario metadata)")
+    ini = sc.model.initial
+    speed = f"vt_kts={ini.vt_kts}" if getattr(ini, "vt_kts", None) else f"vc_kts={ini.vc_kts}"
+    spec = f"h_ft={ini.h_ft};{speed}"
+    if getattr(ini, "flaps_deg", 0.0):
+        spec += f";flaps_deg={ini.flaps_deg}"
+    sched = linearize_grid(parse_grid_spec(spec, sc.aircraft), validate=False)
+    found = sched.model_at(sc.operating_point(), dt_s=1.0 / rate_hz)
+    sim_rate_hz = float(meta.get("rate_hz", sc.model.rate_hz))
+    return paired_model(found.model, sim_rate_hz), sc.aircraft
+
+
+def build_detector(spec: DetectorSpec, model: Any) -> Any:
+    """Design one registered detector from ``model``; unknown options get a "did you mean"."""
+    plugin = registry.get("detector", spec.id)
+    try:
+        sig = inspect.signature(plugin.factory)
+        known = [p for p in sig.parameters if p != "model"]
+        has_var = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
+    except (TypeError, ValueError):
+        known, has_var = [], True
+    for k in spec.params:
+        if not has_var and k not in known:
+            close = difflib.get_close_matches(k, known, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ScenarioError("--detector", f"{spec.id}:{k}", f"unknown option {k!r}{hint}",
+                                f"options of {spec.id}: {', '.join(known)}")
+    return plugin.factory(model, **dict(spec.params))
+
+
+def run_detector(det: Any, ident: str, samples: Samples, model: Any) -> DetectorTrace:
+    """Step a detector through the samples (absolute u, y in the model's order, disturbances 0)."""
+    n = samples.n
+    m_in = tuple(model.input_names)
+    cols = [m_in.index(nm) for nm in samples.input_names]
+    u_abs = np.tile(np.asarray(model.u0, dtype=float), (n, 1))
+    u_abs[:, cols] += samples.du
+    y_abs = samples.dy + samples.y0
+    stat = np.full(n, np.nan)
+    thr = np.full(n, np.nan)
+    alarm = np.zeros(n, dtype=bool)
+    valid = np.zeros(n, dtype=bool)
+    iso: list[str | None] = [None] * n
+    if hasattr(det, "reset"):
+        det.reset(np.random.default_rng(0))
+    t0 = time.perf_counter()
+    for j in range(n):
+        r = det.step(float(samples.t_s[j]), u_abs[j], y_abs[j])
+        ok = bool(r.valid and math.isfinite(r.statistic))  # a NaN statistic is never a valid "no alarm"
+        stat[j], thr[j], valid[j] = r.statistic, r.threshold, ok
+        alarm[j] = bool(r.alarm) and ok
+        iso[j] = r.isolation if alarm[j] else None
+    cost = (time.perf_counter() - t0) / max(n, 1) * 1e6
+    return DetectorTrace(ident, samples.t_s, stat, thr, alarm, valid, tuple(iso), cost)
+
+
+def _matches(isolation: str | None, target: str) -> bool | None:
+    if isolation is None:
+        return None
+    return isolation == target or isolation.startswith(target + "_") or isolation.startswith(target)
+
+
+def outcome(trace: DetectorTrace, spec: DetectorSpec, faults: Sequence[Mapping[str, Any]], rate_hz: float) -> DetectorOutcome:
+    """Counts, onsets and per-fault detection of one trace."""
+    a = trace.alarm
+    onsets = int(np.count_nonzero(a[1:] & ~a[:-1]) + (a[0] if len(a) else 0))
+    faulty = np.zeros(len(a), dtype=bool)
+    for f in faults:
+        for w0, w1 in f.get("windows_s", []):
+            faulty |= (trace.t_s >= w0) & (trace.t_s < w1)
+    flight_h = len(a) / rate_hz / S_PER_H
+    outs = []
+    for f in faults:
+        wins = f.get("windows_s", [])
+        if not wins:
+            continue
+        t_on = float(wins[0][0])
+        idx = np.flatnonzero(a & (trace.t_s >= t_on))
+        if idx.size:
+            j = int(idx[0])
+            iso = trace.isolation[j]
+            outs.append(FaultOutcome(f["label"], f.get("target", ""), f.get("type", ""), t_on, float(trace.t_s[j]),
+                                     float(trace.t_s[j] - t_on), iso, _matches(iso, f.get("target", ""))))
+        else:
+            outs.append(FaultOutcome(f["label"], f.get("target", ""), f.get("type", ""), t_on, None, None, None, None))
+    return DetectorOutcome(
+        id=spec.id, params=dict(spec.params), samples=len(a), valid_samples=int(trace.valid.sum()),
+        alarm_samples=int(a.sum()), alarm_fraction=float(a.mean()) if len(a) else 0.0, alarm_onsets=onsets,
+        flight_h=flight_h, onsets_per_h=onsets / flight_h if flight_h else 0.0,
+        fault_free_samples=int((~faulty).sum()), fault_free_alarm_samples=int((a & ~faulty).sum()),
+        cost_us_per_sample=trace.cost_us_per_sample, faults=tuple(outs))
+
+
+def detect_log(path: str | Path, specs: Sequence[DetectorSpec], rate_hz: float = DEFAULT_RATE_HZ,
+               out: str | Path | None = None) -> tuple[DetectReport, list[DetectorTrace]]:
+    """Run detectors over a flight log.
+
+    Parameters
+    ----------
+    path : path
+        A log written by ``fdi-sim run``.
+    specs : sequence of DetectorSpec
+        The detectors; at least one.
+    rate_hz : float
+        Detector rate [Hz]; must divide the log's rate.
+    out : path, optional
+        Write the input's topics plus ``/fdi/<id>/statistic`` (statistic, threshold, alarm,
+        valid per sample) and ``/fdi/alarms`` (every alarm transition: raised with its isolation,
+        cleared) here.
+
+    Returns
+    -------
+    (DetectReport, list of DetectorTrace)
+        A detector that cannot be designed is reported with its reason (``error``), not raised.
+    """
+    if not specs:
+        raise ScenarioError("--detector", "", "no detector given", "pass --detector ID (see `fdi-sim plugins`)")
+    log = read_log(path)
+    model, aircraft = model_for_log(log, rate_hz)
+    from fdi_sim.sensors import load_suite
+
+    rates = {s.name: s.rate_hz for s in load_suite(aircraft)}
+    samples = log_samples(log, model, rate_hz, sensor_rates_hz=rates)
+    faults = fault_windows(log)
+    outcomes, traces = [], []
+    for spec in specs:
+        try:
+            det = build_detector(spec, model)
+        except (DesignError, TypeError, ValueError) as exc:
+            if isinstance(exc, ScenarioError):
+                raise
+            outcomes.append(DetectorOutcome(spec.id, dict(spec.params), samples.n, 0, 0, 0.0, 0, 0.0, 0.0, 0, 0, 0.0, (),
+                                            error=str(exc)))
+            continue
+        tr = run_detector(det, spec.id, samples, model)
+        traces.append(tr)
+        outcomes.append(outcome(tr, spec, faults, rate_hz))
+    out_path = None
+    if out is not None:
+        out_path = str(_write(log, Path(out), traces, rate_hz))
+    return DetectReport(str(path), aircraft, float(rate_hz), tuple(outcomes), out_path), traces
+
+
+def _write(log: FlightLog, out: Path, traces: Sequence[DetectorTrace], rate_hz: float) -> Path:
+    vectors, alarms = [], []
+    for tr in traces:
+        vals = np.column_stack([tr.statistic, tr.threshold, tr.alarm.astype(float), tr.valid.astype(float)])
+        vectors.append(NewVectorTopic(fdi_topic(tr.id, "statistic"), "fdi_sim/msg/DetectorStatistic",
+                                      ("statistic", "threshold", "alarm", "valid"), tr.t_s, vals))
+        a = tr.alarm
+        before = np.concatenate(([False], a[:-1]))
+        for j in np.flatnonzero(a != before):  # every transition: raised (with its isolation) and cleared
+            ev = {"detector": tr.id, "alarm": bool(a[j]), "isolation": tr.isolation[j]}
+            for key, x in (("statistic", tr.statistic[j]), ("threshold", tr.threshold[j])):
+                if math.isfinite(x):  # a non-finite statistic is left out, not written as a number
+                    ev[key] = float(x)
+            alarms.append((float(tr.t_s[j]), ev))
+    alarms.sort(key=lambda e: e[0])
+    events = [NewEventTopic(TOPIC_FDI_ALARMS, "fdi_sim/msg/Alarm", ALARM_JSON_SCHEMA, tuple(alarms))]
+    meta = {"detect": {"rate_hz": f"{rate_hz:g}", "detectors": json.dumps([t.id for t in traces]),
+                       "source": str(log.path)}}
+    return write_extended(log, out, vectors, events, meta)
