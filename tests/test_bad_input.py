@@ -221,3 +221,15 @@ def test_trim_error_with_source_and_pickle() -> None:
     assert isinstance(w, RuntimeError) and str(e).startswith("cannot trim DHC6")
     back = pickle.loads(pickle.dumps(w))
     assert str(back) == str(w) and back.key == "initial"
+
+
+@pytest.mark.parametrize("command", ["info", "verify", "repair"])
+def test_log_commands_refuse_devices_and_folders(tmp_path: Path, command: str) -> None:
+    """A log path that is a link to /dev/zero (it used to hang `info`) or a folder: exit 2 at once."""
+    zero = tmp_path / "zero.mcap"
+    zero.symlink_to("/dev/zero")
+    for path, expected in ((zero, "not a regular file"), (tmp_path, "is a folder")):
+        r = subprocess.run([sys.executable, "-m", "fdi_sim.cli", command, str(path)], capture_output=True, text=True,
+                           cwd=REPO, timeout=60)
+        assert r.returncode == 2, (command, r.stderr)
+        assert expected in r.stderr and "Traceback" not in r.stderr, r.stderr

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import io
 import json
+import os
+import stat
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -277,8 +279,27 @@ def _check_framing(path: Path, data: bytes) -> None:
                        f"before the log was closed); rebuild it with `fdi-sim repair {path}`")
 
 
-def _read_bytes(path: str | Path) -> tuple[Path, bytes]:
+def check_log_file(path: str | Path) -> Path:
+    """Refuse what is not a regular file before reading it (a link to /dev/zero would never end).
+
+    Raises
+    ------
+    LogError
+        Missing, a folder, a device, a FIFO or a socket (after following links).
+    """
     p = Path(path)
+    try:
+        st = os.stat(p)
+    except OSError as exc:
+        raise LogError(str(path), f"cannot read the flight log ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file (a device, FIFO or socket)"
+        raise LogError(str(path), f"the path is {kind}; pass an MCAP file written by `fdi-sim run`")
+    return p
+
+
+def _read_bytes(path: str | Path) -> tuple[Path, bytes]:
+    p = check_log_file(path)
     try:
         return p, p.read_bytes()
     except OSError as exc:
@@ -431,7 +452,7 @@ def log_info(path: str | Path) -> LogInfo:
     LogError
         As :func:`read_log`.
     """
-    p = Path(path)
+    p = check_log_file(path)
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
     n_tail = len(MCAP_MAGIC) + FOOTER_RECORD_BYTES

@@ -29,6 +29,7 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Schema
 
 from fdi_sim.errors import LogError
+from fdi_sim.flightlog.reader import check_log_file
 from fdi_sim.flightlog.records import (
     MCAP_MAGIC,
     RawMessage,
@@ -158,6 +159,7 @@ def repair_log(src: str | Path, dst: str | Path | None = None, *, compression: s
     """
     src_p = Path(src)
     dst_p = Path(dst) if dst is not None else src_p.with_name(src_p.stem + ".repaired.mcap")
+    check_log_file(src_p)
     try:
         data = src_p.read_bytes()
     except OSError as exc:

@@ -35,6 +35,7 @@ import numpy as np
 from mcap.opcode import Opcode
 
 from fdi_sim.errors import LogError
+from fdi_sim.flightlog.reader import check_log_file
 from fdi_sim.flightlog.framing import (
     DATA_OPCODES,
     SUMMARY_OPCODES,
@@ -151,6 +152,7 @@ def verify_log(path: str | Path) -> VerifyReport:
         The file cannot be read, or is not an MCAP file at all (neither end holds the magic).
     """
     p = Path(path)
+    check_log_file(p)
     try:
         data = p.read_bytes()
     except OSError as exc:
