@@ -277,6 +277,9 @@ def _inverse_sqrt(M: NDArray, what: str) -> NDArray[np.float64]:
     M = np.asarray(M, float)
     if M.ndim != 2 or M.shape[0] != M.shape[1]:
         raise DesignError(f"{what} must be a square matrix, got shape {M.shape}")
+    if not np.all(np.isfinite(M)):
+        raise DesignError(f"{what} is not finite (NaN or inf entries): the model or the noise covariance is "
+                          "mis-scaled (an input or output in the wrong unit?); check model.B, model.D and R")
     if not np.allclose(M, M.T, rtol=1e-8, atol=1e-12 * max(np.abs(M).max(), 1e-300)):
         raise DesignError(f"{what} must be symmetric")
     ev, V = np.linalg.eigh((M + M.T) / 2)
