@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import importlib
 
-for _mod in ("fdi_sim.detectors.catalogue_parity", "fdi_sim.detectors.catalogue_observers"):
+for _mod in ("fdi_sim.detectors.catalogue_parity", "fdi_sim.detectors.catalogue_observers", "fdi_sim.detectors.catalogue_kinematic"):
     try:
         importlib.import_module(_mod)
     except ModuleNotFoundError as exc:  # a family not landed yet registers nothing

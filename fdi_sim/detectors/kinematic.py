@@ -187,6 +187,14 @@ class KinematicDesign:
         Time constant of the steady-wind average [s].
     gnss_rate_hz : float
         GNSS velocity rate [Hz] (freshness in :meth:`KinematicDetector.step`).
+    tau_bias_s : float
+        If positive, the residual's own slow mean (running mean, then first order with this time
+        constant [s]; not updated while the statistic is over the threshold) is subtracted: it
+        removes the sensors' turn-on biases (gyro 0.05 deg/s, vertical speed 0.2 ft/s), which would
+        otherwise set the threshold. A step fault is then detected at its onset and stays detected
+        (the mean is frozen during the alarm).
+    warmup_s : float
+        With ``tau_bias_s``, the residual is invalid until this long of valid residuals is averaged [s].
     """
 
     kind: str
@@ -197,6 +205,8 @@ class KinematicDesign:
     average_s: float = 1.0
     tau_wind_s: float = 60.0
     gnss_rate_hz: float = 10.0
+    tau_bias_s: float = 0.0
+    warmup_s: float = 5.0
 
 
 #: channels and hypotheses per kind
@@ -257,6 +267,8 @@ class _State:
     wind_ned_fps: NDArray[np.float64] | None = None
     n_gnss: int = 0
     last_r: NDArray[np.float64] | None = None
+    r_mean: NDArray[np.float64] | None = None
+    n_mean: int = 0
 
 
 class KinematicDetector:
@@ -356,7 +368,8 @@ class KinematicDetector:
         new["_ok"] = np.asarray(ok, dtype=float)
         new["_gnss"] = np.asarray(gnss_fresh, dtype=float)
         state = _State(dict(state.tail), None if state.wind_ned_fps is None else state.wind_ned_fps.copy(),
-                       state.n_gnss, None if state.last_r is None else state.last_r.copy())
+                       state.n_gnss, None if state.last_r is None else state.last_r.copy(),
+                       None if state.r_mean is None else state.r_mean.copy(), state.n_mean)
         if kind in ("airspeed", "flow-angles"):
             new.update(self._air_rows(new, state))  # the wind average is recursive: rows in order
         m = len(new["_ok"])
@@ -366,7 +379,28 @@ class KinematicDetector:
         r_full = getattr(self, "_r_" + kind.replace("-", "_"))(full, state, L0)
         keep = self._n_win + self._n_avg + 1
         state.tail = {n: v[-keep:] for n, v in full.items()}
-        return r_full[L0:], state
+        r = r_full[L0:]
+        if self.design.tau_bias_s > 0:
+            r = self._debias(r, state)
+        return r, state
+
+    def _debias(self, r: NDArray[np.float64], state: _State) -> NDArray[np.float64]:
+        """``r - m``, ``m <- m + g (r - m)``, ``g = max(1/n, dt/tau)``; m frozen while the statistic alarms."""
+        out = np.full_like(r, np.nan)
+        scales = np.asarray(self.design.scales)
+        g_floor = self._dt_s / self.design.tau_bias_s
+        n_warm = int(round(self.design.warmup_s * self.design.rate_hz))
+        for k in range(len(r)):  # recursive, in row order
+            if not np.all(np.isfinite(r[k])):
+                continue
+            if state.r_mean is not None and state.n_mean >= n_warm:
+                out[k] = r[k] - state.r_mean
+                if np.max(np.abs(out[k]) / scales) > self.design.threshold:
+                    continue  # an alarmed sample does not teach the mean
+            state.n_mean += 1
+            g = max(1.0 / state.n_mean, g_floor)
+            state.r_mean = r[k].copy() if state.r_mean is None else state.r_mean + g * (r[k] - state.r_mean)
+        return out
 
     def _r_attitude(self, c: Mapping[str, NDArray], state: _State, L0: int) -> NDArray[np.float64]:
         n, dt = self._n_win, self._dt_s
