@@ -123,7 +123,8 @@ def main(quick: bool = False) -> None:
         log, s = fly_text(text, ac, out / Path(path).stem)
         onset = fault_onset_s(log)
         for kind in KINDS:
-            res = KinematicDetector(design(kind, ac, level), id=f"kinematic-{kind}-v1").run(s)
+            res = KinematicDetector(design(kind, ac, level, threshold=thr[(ac, level, kind)]),
+                                    id=f"kinematic-{kind}-v1").run(s)
             a = res.alarm
             first = float(s.t_s[np.argmax(a)]) if a.any() else float("nan")
             before = bool(np.any(a & (s.t_s < onset)))

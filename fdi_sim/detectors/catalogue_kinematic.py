@@ -31,7 +31,32 @@ WINDOWS: dict[str, tuple[float, float, float, float]] = {
     "flow-angles": (2.0, 1.0, 60.0, 0.0),
 }
 #: calibrated thresholds on max |r_i| / scale_i, per (aircraft, turbulence, kind)
-THRESHOLDS: dict[tuple[str, str, str], float] = {}
+THRESHOLDS: dict[tuple[str, str, str], float] = {
+    ('f16', 'none', 'attitude'): 3.689,
+    ('f16', 'none', 'altitude'): 3.422,
+    ('f16', 'none', 'airspeed'): 0.148,
+    ('f16', 'none', 'flow-angles'): 2.520,
+    ('f16', 'light', 'attitude'): 3.810,
+    ('f16', 'light', 'altitude'): 3.643,
+    ('f16', 'light', 'airspeed'): 4.761,
+    ('f16', 'light', 'flow-angles'): 28.070,
+    ('f16', 'moderate', 'attitude'): 4.027,
+    ('f16', 'moderate', 'altitude'): 3.858,
+    ('f16', 'moderate', 'airspeed'): 7.448,
+    ('f16', 'moderate', 'flow-angles'): 43.726,
+    ('DHC6', 'none', 'attitude'): 3.529,
+    ('DHC6', 'none', 'altitude'): 3.447,
+    ('DHC6', 'none', 'airspeed'): 0.138,
+    ('DHC6', 'none', 'flow-angles'): 3.119,
+    ('DHC6', 'light', 'attitude'): 3.505,
+    ('DHC6', 'light', 'altitude'): 3.440,
+    ('DHC6', 'light', 'airspeed'): 8.774,
+    ('DHC6', 'light', 'flow-angles'): 93.550,
+    ('DHC6', 'moderate', 'attitude'): 3.541,
+    ('DHC6', 'moderate', 'altitude'): 3.568,
+    ('DHC6', 'moderate', 'airspeed'): 12.672,
+    ('DHC6', 'moderate', 'flow-angles'): 136.641,
+}
 LEVELS = ("none", "light", "moderate")
 
 
@@ -51,9 +76,11 @@ def design(kind: str, aircraft: str | None = None, turbulence: str = "moderate",
 
 def _factory(kind: str):
     def make(model: Any = None, turbulence: str = "moderate", aircraft: str | None = None,
-             **overrides: Any) -> KinematicDetector:
-        names = tuple(getattr(model, "output_names", ()) or MEASUREMENTS)
+             output_names: tuple[str, ...] | None = None, **overrides: Any) -> KinematicDetector:
+        names = tuple(output_names or getattr(model, "output_names", ()) or MEASUREMENTS)
         ac = aircraft or (getattr(model, "meta", None) or {}).get("aircraft")
+        if "rate_hz" not in overrides and getattr(model, "is_discrete", False):
+            overrides["rate_hz"] = 1.0 / float(model.dt_s)  # run at the model's rate (threshold from 20 Hz)
         return KinematicDetector(design(kind, ac, turbulence, **overrides), names, id=f"kinematic-{kind}-v1")
 
     make.__doc__ = f"The kinematic {kind} check (``fdi_sim.detectors.kinematic``), calibrated threshold."

@@ -18,7 +18,8 @@ exact kinematics (no aerodynamic model, so no model error and no trim dependence
 ``altitude``
     baro altitude increment against the integrated GNSS vertical velocity,
     ``e_h = h(t) - h(t - T) + int v_down dt`` [ft], and the air-data vertical speed against it,
-    ``e_hdot = mean(hdot + v_down)`` [ft/s]; one of them out of bounds points at that sensor, both
+    ``e_hdot = mean(hdot + v_down)`` [ft/s], both at the GNSS samples (``v_down`` linear between
+    them) and held in between; one of them out of bounds points at that sensor, both
     at the GNSS ``v_down_fps``.
 ``airspeed``
     true airspeed from ``vc_kts`` through the standard atmosphere at the baro altitude (no
@@ -423,14 +424,41 @@ class KinematicDetector:
 
     def _r_altitude(self, c: Mapping[str, NDArray], state: _State, L0: int) -> NDArray[np.float64]:
         n, na, dt = self._n_win, self._n_avg, self._dt_s
-        h, hd, vd = c["h_ft"], c["hdot_fps"], c["v_down_fps"]
+        h, hd = c["h_ft"], c["hdot_fps"]
+        fresh = (c["_gnss"] > 0.5) & (c["_ok"] > 0.5)
+        rows = np.flatnonzero(fresh)
+        if rows.size == 0:
+            return np.full((len(h), 2), np.nan)
+        # v_down between its own samples: linear (the GNSS rate is below the detector rate; using the
+        # held value would add a lag of up to one GNSS period, 0.8 ft/s in a 0.5 g pull-up)
+        vd = np.interp(np.arange(len(h)), rows, c["v_down_fps"][rows])
         I = np.cumsum(np.concatenate([[0.0], 0.5 * (vd[1:] + vd[:-1]) * dt]))
-        r = np.full((len(h), 2), np.nan)
+        raw = np.full((len(h), 2), np.nan)
         if len(h) > n:
-            r[n:, 0] = h[n:] - h[:-n] + (I[n:] - I[:-n])  # dh = -int v_down dt
-        r[:, 1] = _moving_mean(hd + vd, na)
+            raw[n:, 0] = h[n:] - h[:-n] + (I[n:] - I[:-n])  # dh = -int v_down dt
+        raw[:, 1] = hd + vd
+        raw[~fresh] = np.nan  # evaluated at GNSS samples only, held between them
+        held = self._hold(raw, c, state, L0)
+        r = np.column_stack([held[:, 0], _moving_mean(held[:, 1], na)])
         r[~self._valid_window(c["_ok"], max(n, na)), :] = np.nan
         return r
+
+    def _hold(self, raw: NDArray[np.float64], c: Mapping[str, NDArray], state: _State, L0: int) -> NDArray:
+        """Forward fill of the finite rows of ``raw`` over the new rows; the tail keeps its held values."""
+        held = np.full_like(raw, np.nan)
+        if L0:
+            held[:L0] = np.column_stack([c[f"_h{i}"][:L0] for i in range(raw.shape[1])])
+        good = np.isfinite(raw).all(axis=1)
+        last = state.last_r
+        for k in range(L0, len(raw)):  # forward fill over the new rows only
+            if good[k]:
+                last = raw[k]
+            if last is not None:
+                held[k] = last
+        state.last_r = last
+        for i in range(raw.shape[1]):  # carried with the tail so the next call's window sees it
+            c[f"_h{i}"] = held[:, i]  # type: ignore[index]
+        return held
 
     def _air_rows(self, c: Mapping[str, NDArray], state: _State) -> dict[str, NDArray]:
         """Per new row: true airspeed, measured air velocity (NED) and the wind average before the row."""
@@ -472,20 +500,9 @@ class KinematicDetector:
         return self._air_finish(raw, c, state, L0)
 
     def _air_finish(self, raw: NDArray, c: Mapping[str, NDArray], state: _State, L0: int) -> NDArray:
-        """Hold between GNSS samples (only the new rows), keep the tail's held values, average."""
-        held = np.full_like(raw, np.nan)
-        if L0:
-            held[:L0] = np.column_stack([c[f"_h{i}"][:L0] for i in range(raw.shape[1])])
-        fresh = (c["_gnss"] > 0.5) & (c["_ok"] > 0.5) & np.isfinite(raw).all(axis=1)
-        last = state.last_r
-        for k in range(L0, len(raw)):  # forward fill over the new rows only
-            if fresh[k]:
-                last = raw[k]
-            if last is not None:
-                held[k] = last
-        state.last_r = last
-        for i in range(raw.shape[1]):  # carried with the tail so the next call's average sees it
-            c[f"_h{i}"] = held[:, i]  # type: ignore[index]
+        """Evaluate at GNSS samples, hold between them, average."""
+        fresh = (c["_gnss"] > 0.5) & (c["_ok"] > 0.5)
+        held = self._hold(np.where(fresh[:, None], raw, np.nan), c, state, L0)
         out = np.column_stack([_moving_mean(held[:, i], self._n_avg) for i in range(raw.shape[1])])
         out[~self._valid_window(c["_ok"], self._n_avg)] = np.nan
         return out

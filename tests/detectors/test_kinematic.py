@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 import tomllib
 from pathlib import Path
 
@@ -80,18 +81,23 @@ def test_euler_rates_and_isa_inverse() -> None:
 
 @pytest.mark.parametrize("ac", list(CRUISE))
 def test_held_out_false_alarms_meet_the_target(moderate_flights: dict, ac: str) -> None:
-    """Calibrated on 2 flights, the held-out per-sample false-alarm fraction's 95 % interval reaches 1e-3."""
+    """Shipped thresholds (8 x 120 s calibration flights, seeds 1-8) on 2 held-out 60 s flights: the
+    per-sample false-alarm fraction is not significantly above 1e-3 (the lower end of its
+    Clopper-Pearson 95 % interval is at most 1e-3); the same quantile rule on the 2 short calibration
+    flights gives a threshold within a factor 3 of the shipped one."""
     flights = moderate_flights[ac]
     for kind in KINDS:
-        det = KinematicDetector(design(kind, ac, "moderate", threshold=np.inf))
+        shipped = design(kind, ac, "moderate")
+        det = KinematicDetector(replace(shipped, threshold=np.inf))
         z = [det.run(s).statistic for s in flights]
-        thr = empirical_threshold(z[:2], 1e-3)
         held = np.concatenate(z[2:])
         held = held[np.isfinite(held)]
-        k, n = int(np.sum(held > thr)), held.size
+        k, n = int(np.sum(held > shipped.threshold)), held.size
         lo = 0.0 if k == 0 else float(beta.ppf(0.025, k, n - k + 1))
         assert n > 0.9 * 2 * 60 * RATE_HZ - 2 * 20 * RATE_HZ, (kind, n)  # the checks are valid most of the time
-        assert lo <= 1e-3, (ac, kind, k, n, thr)  # not significantly above the target
+        assert lo <= 1e-3, (ac, kind, k, n, shipped.threshold)  # not significantly above the target
+        short = empirical_threshold(z[:2], 1e-3)
+        assert 1 / 3 < short / shipped.threshold < 3.0, (ac, kind, short, shipped.threshold)
 
 
 def test_step_matches_run_and_satisfies_the_contract(moderate_flights: dict) -> None:
