@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-slow bench venv clean
+.PHONY: demo test test-slow bench venv clean node-tools
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -17,7 +17,15 @@ venv: $(STAMP)
 demo: $(STAMP)  ## fly the headline scenario, write an MCAP, print a summary
 	$(VENV)/bin/fdi-sim run scenarios/f16_cruise_doublets.toml --out runs/demo
 
-test: $(STAMP)  ## the default suite (under 15 min); long studies are marked slow
+# node modules for tests/flightlog/test_foxglove.py (Foxglove's decoders), from the lock file
+NODE_TOOLS := tools/foxglove/node_modules/.package-lock.json
+$(NODE_TOOLS): tools/foxglove/package-lock.json
+	@command -v npm >/dev/null || { echo "npm not found: tests/flightlog/test_foxglove.py will skip"; exit 0; }; \
+	npm ci --prefix tools/foxglove --no-audit --no-fund && touch $@
+
+node-tools: $(NODE_TOOLS)
+
+test: $(STAMP) node-tools  ## the default suite (under 15 min); long studies are marked slow
 	$(PY) -m pytest -q tests
 
 test-slow: $(STAMP)  ## only the long studies and reproductions
