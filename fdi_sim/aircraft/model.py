@@ -19,7 +19,7 @@ os.environ.setdefault("JSBSIM_DEBUG", "0")  # silence the banner before the firs
 import jsbsim  # noqa: E402
 
 from fdi_sim.aircraft.overlays import jsbsim_root  # noqa: E402
-from fdi_sim.aircraft.properties import SurfaceSpec, property_map, surfaces  # noqa: E402
+from fdi_sim.aircraft.properties import Scaled, SurfaceSpec, property_map, surfaces  # noqa: E402
 from fdi_sim.errors import FdiSimError  # noqa: E402
 from fdi_sim.units import FPS_PER_KT  # noqa: E402
 
@@ -180,7 +180,14 @@ class Aircraft:
         if name not in self._map:
             raise KeyError(f"unknown signal {name!r} for {self.name}")
         props = self._map[name]
+        if isinstance(props, Scaled):
+            return (props.prop,)
         return (props,) if isinstance(props, str) else props
+
+    def _signal_factor(self, name: str) -> float | None:
+        """The constant a :class:`Scaled` signal multiplies its property by; None for the others."""
+        spec = self._map[name]
+        return spec.factor if isinstance(spec, Scaled) else None
 
     def reader(self, names: Sequence[str]) -> Callable[[], NDArray[np.float64]]:
         """A fast closure returning the named signals as a new float64 array.
@@ -190,7 +197,10 @@ class Aircraft:
         getters: list[Callable[[], float]] = []
         for name in names:
             parts = [self.node(p).get_double_value for p in self._signal_props(name)]
-            if len(parts) == 1:
+            factor = self._signal_factor(name)
+            if factor is not None:
+                getters.append(lambda g=parts[0], f=factor: f * g())
+            elif len(parts) == 1:
                 getters.append(parts[0])
             else:
                 getters.append(lambda parts=parts: sum(g() for g in parts))
@@ -204,32 +214,40 @@ class Aircraft:
     def list_reader(self, names: Sequence[str]) -> Callable[[], list[float]]:
         """A faster closure returning the named signals as a new list of Python floats.
 
-        The same values as :meth:`reader`, bit for bit (a summed signal is ``sum`` of its parts, as
-        there). One ``map`` of the unbound node getter over the cached nodes: about 1.8 us for the
-        29 truth signals against 4.7 us for :meth:`reader` (numpy.fromiter over a generator).
+        The same values as :meth:`reader`, bit for bit (a summed signal is ``sum`` of its parts, a
+        scaled one ``factor * value``, as there). One ``map`` of the unbound node getter over the
+        cached nodes: about 1.8 us for the 29 truth signals against 4.7 us for :meth:`reader`
+        (numpy.fromiter over a generator).
         """
         nodes: list[object] = []
         sums: list[tuple[int, int]] = []  # summed signals: (first, end) index into the flat reads
+        scales: list[tuple[int, float]] = []  # scaled signals: (index into the flat reads, factor)
         for name in names:
             props = self._signal_props(name)
+            factor = self._signal_factor(name)
+            if factor is not None:
+                scales.append((len(nodes), factor))
             if len(props) > 1:
                 sums.append((len(nodes), len(nodes) + len(props)))
             nodes.extend(self.node(p) for p in props)
         get = jsbsim.FGPropertyNode.get_double_value
-        if not sums:
+        if not sums and not scales:
             def read() -> list[float]:
                 return list(map(get, nodes))
             return read
-        # rebuild the output from the flat reads: summed signals back to front so indexes hold
+        # rebuild the output from the flat reads: scaled signals (one node each) in place, then the
+        # summed ones back to front so that the indexes of the others hold
         plan = sorted(sums, reverse=True)
 
-        def read_summed() -> list[float]:
+        def read_combined() -> list[float]:
             v = list(map(get, nodes))
+            for i, f in scales:
+                v[i] = f * v[i]
             for a, b in plan:
                 v[a:b] = [sum(v[a:b])]
             return v
 
-        return read_summed
+        return read_combined
 
     def read(self, names: Sequence[str]) -> NDArray[np.float64]:
         """Read the named signals once (slow path; use :meth:`reader` in loops)."""

@@ -2,6 +2,10 @@
 
 Everything outside ``fdi_sim.aircraft`` speaks only the suffixed names. A few signals map to
 different properties on each aircraft (the DHC-6 aero model reads the *left* aileron only).
+A signal is one property, the sum of several (a tuple: thrust of both engines) or one property
+times a constant (:class:`Scaled`: the propeller's reaction torque turned into the gauge's torque).
+The truth state is the common :data:`TRUTH_SIGNALS` followed by the aircraft's engine signals
+(:data:`ENGINE_SIGNALS`); :func:`truth_signals` gives the whole tuple.
 """
 from __future__ import annotations
 
@@ -62,7 +66,46 @@ _COMMON: dict[str, str] = {
     "rudder_pos_rad": "fcs/rudder-pos-rad",
 }
 
-_PER_AIRCRAFT: dict[str, dict[str, str | tuple[str, ...]]] = {
+@dataclass(frozen=True)
+class Scaled:
+    """A signal that is one JSBSim property times a constant: ``signal = factor * prop``.
+
+    Attributes
+    ----------
+    prop : str
+        JSBSim property.
+    factor : float
+        Multiplier [signal unit per property unit].
+    """
+
+    prop: str
+    factor: float
+
+
+#: what one entry of the property map may be: a property, a sum of properties, a scaled property
+PropertySpec = str | tuple[str, ...] | Scaled
+
+
+def _engine_gauges(i: int) -> dict[str, PropertySpec]:
+    """The PT6A-27 cockpit gauges of DHC-6 engine ``i`` (0 left, y = -109 in; 1 right), as truth.
+
+    * ``n1_<i>_pct``: gas-generator speed Ng [% of 37 500 rpm], JSBSim's ``FGTurboProp`` N1.
+    * ``torque_<i>_ftlb``: propeller shaft torque [lbf ft]. JSBSim gives the torque the propeller
+      absorbs, ``propeller-torque-ftlb = -sense P_required / omega`` (FGPropeller; ``sense`` = +1 on
+      both DHC-6 propellers, so the reading is negative): the gauge is its negative. It equals the
+      engine's shaft torque ``550 P_hp / omega`` at steady rpm and differs by the propeller's
+      ``I dOmega/dt`` while the rpm moves (0.05 % on a full-throttle step, far below the gauge's 1 %).
+    * ``prop_<i>_rpm``: propeller speed [rpm].
+    """
+    e = f"propulsion/engine[{i}]"
+    return {
+        f"n1_{i}_pct": f"{e}/n1",
+        f"torque_{i}_ftlb": Scaled(f"{e}/propeller-torque-ftlb", -1.0),
+        f"prop_{i}_rpm": f"{e}/propeller-rpm",
+    }
+
+
+_PER_AIRCRAFT: dict[str, dict[str, PropertySpec]] = {
     "f16": {
         "aileron_pos_rad": "fcs/aileron-pos-rad",
         "throttle_pos_norm": "fcs/throttle-pos-norm",
@@ -74,6 +117,8 @@ _PER_AIRCRAFT: dict[str, dict[str, str | tuple[str, ...]]] = {
         "throttle_pos_norm": "fcs/throttle-pos-norm",
         "thrust_lbf": ("propulsion/engine[0]/thrust-lbs", "propulsion/engine[1]/thrust-lbs"),  # both engines, summed
         "flaps_pos_rad": "fcs/flap-pos-rad",
+        **_engine_gauges(0),
+        **_engine_gauges(1),
     },
 }
 
@@ -85,6 +130,13 @@ TRUTH_SIGNALS: tuple[str, ...] = (
     "lat_deg", "lon_deg",
     "turb_north_fps", "turb_east_fps", "turb_down_fps",
 )
+#: per aircraft, the engine signals appended to :data:`TRUTH_SIGNALS` on ``/truth/state`` (and
+#: measured by the engine gauges of the sensor suite). The F-16 has none yet: its logs stay as they
+#: were (its F100 core speed would be ``propulsion/engine/n2``, one entry here and one gauge).
+ENGINE_SIGNALS: dict[str, tuple[str, ...]] = {
+    "f16": (),
+    "DHC6": ("n1_0_pct", "n1_1_pct", "torque_0_ftlb", "torque_1_ftlb", "prop_0_rpm", "prop_1_rpm"),
+}
 #: the pilot's commands, in the order logged on ``/commands/pilot``
 COMMAND_SIGNALS: tuple[str, ...] = ("elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm", "throttle_cmd_norm")
 #: what the plant actually flies, logged on ``/truth/surfaces``
@@ -176,10 +228,20 @@ def surfaces(aircraft: str) -> dict[str, SurfaceSpec]:
     return SURFACES[aircraft_base(aircraft)]
 
 
-def property_map(aircraft: str) -> MappingProxyType[str, str | tuple[str, ...]]:
+def truth_signals(aircraft: str) -> tuple[str, ...]:
+    """The signals of ``/truth/state`` for one aircraft: :data:`TRUTH_SIGNALS` then its engine signals.
+
+    The common signals come first and in the same order on every aircraft, so their indexes do not
+    depend on the aircraft.
+    """
+    return TRUTH_SIGNALS + ENGINE_SIGNALS[aircraft_base(aircraft)]
+
+
+def property_map(aircraft: str) -> MappingProxyType[str, PropertySpec]:
     """Signal name -> JSBSim property for one aircraft (``"f16"`` or ``"DHC6"``-based).
 
-    A tuple of properties means the signal is their sum (thrust of several engines).
+    A tuple of properties means the signal is their sum (thrust of several engines); a
+    :class:`Scaled` one property times a constant.
     """
     base = aircraft_base(aircraft)
     if base not in _PER_AIRCRAFT:

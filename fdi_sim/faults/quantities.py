@@ -25,10 +25,18 @@ _DIMENSIONS: dict[str, dict[str, float]] = {
     "pressure": {"psf": 1.0},
     "pressure_rate": {"psfps": 1.0},
     "eta": {"eta": 1.0},
+    # engine gauges (DHC-6 PT6A: n1_<i>_pct, torque_<i>_ftlb, prop_<i>_rpm)
+    "percent": {"pct": 1.0},
+    "percent_rate": {"pctps": 1.0},
+    "torque": {"ftlb": 1.0},
+    "torque_rate": {"ftlbps": 1.0},
+    "rotational_speed": {"rpm": 1.0},
+    "rotational_speed_rate": {"rpmps": 1.0},
 }
 _RATE_OF: dict[str, str] = {
     "angle": "angular_rate", "angular_rate": "angular_acceleration", "length": "speed", "speed": "acceleration",
     "acceleration": "jerk", "normalized": "normalized_rate", "mach": "mach_rate", "pressure": "pressure_rate",
+    "percent": "percent_rate", "torque": "torque_rate", "rotational_speed": "rotational_speed_rate",
 }
 _UNIT_DIM: dict[str, str] = {u: d for d, units in _DIMENSIONS.items() for u in units}
 

@@ -27,9 +27,10 @@ import numpy as np
 
 from fdi_sim import registry
 from fdi_sim.aircraft import (
-    COMMAND_SIGNALS, SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, TrimResult, hold_trim_in_wind, trim,
+    COMMAND_SIGNALS, SURFACE_SIGNALS, Aircraft, Atmosphere, TrimResult, hold_trim_in_wind, trim,
 )
 from fdi_sim.aircraft.model import wind_ned_fps
+from fdi_sim.aircraft.properties import truth_signals
 from fdi_sim.errors import LogError, SimulationDiverged, TrimError
 from fdi_sim.faults.injector import FaultInjector
 from fdi_sim.flightlog import (
@@ -214,7 +215,7 @@ def build_sensors(sc: Scenario, dt_s: float) -> SensorSuite:
     s = sc.model.sensors
     overrides = {k: v.model_dump(exclude_none=True) for k, v in s.overrides.items()}
     specs = load_suite(sc.aircraft, s.suite)  # suite and override names checked by the scenario loader
-    return SensorSuite(apply_overrides(specs, s.noise_scale, s.biases, overrides), TRUTH_SIGNALS, dt_s)
+    return SensorSuite(apply_overrides(specs, s.noise_scale, s.biases, overrides), truth_signals(sc.aircraft), dt_s)
 
 
 def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | None = None,
@@ -297,7 +298,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             op = sc.operating_point()
             if fault_defs:
                 injector = FaultInjector(fault_defs, ac, sensors.names, [s.rate_hz for s in sensors.specs],
-                                         TRUTH_SIGNALS, sc.dt_s, sc.duration_s)
+                                         truth_signals(sc.aircraft), sc.dt_s, sc.duration_s)
                 injector.reset(np.random.default_rng(ss_faults))
                 eta0 = injector.initial_icing_eta()
                 if eta0:  # iced from the start: trim with the ice on
@@ -315,7 +316,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             ac.set_atmosphere(atm, jsbsim_seed)
             pilot = build_pilot(sc, tr, sensors.names)
             pilot.reset(np.random.default_rng(ss_pilot))
-            ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + TRUTH_SIGNALS)
+            ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + truth_signals(sc.aircraft))
             ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
             ch_op = writer.add_vector_channel(TOPIC_OPERATING_POINT, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
             ch_cmd = writer.add_vector_channel(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
@@ -417,11 +418,12 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
     ch_ftruth, ch_fevents, ch_valid = fault_channels if fault_channels else (None, None, None)
     # Python floats end to end: lists in, struct-packed rows out (no numpy call per step)
-    read_truth = ac.list_reader(TRUTH_SIGNALS)
+    truth_names = truth_signals(sc.aircraft)  # the common signals, then the aircraft's engine gauges
+    read_truth = ac.list_reader(truth_names)
     read_surf = ac.list_reader(SURFACE_SIGNALS)
     measure = sensors.step_list
     write_cmd = ac.command_writer()
-    idx = {n: i for i, n in enumerate(TRUTH_SIGNALS)}
+    idx = {n: i for i, n in enumerate(truth_names)}
     i_h, i_vc, i_vt, i_phi, i_alpha, i_mach = idx["h_ft"], idx["vc_kts"], idx["vt_fps"], idx["phi_rad"], idx["alpha_rad"], idx["mach"]
     i_vn, i_ve, i_vd = idx["v_north_fps"], idx["v_east_fps"], idx["v_down_fps"]
     i_p, i_q, i_r = idx["p_radps"], idx["q_radps"], idx["r_radps"]
@@ -452,7 +454,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
             xl = read_truth()
             # --- divergence checks on the truth (NaN, ground, departure) -------------------------
             if not math.isfinite(sum(xl)):  # one NaN or inf makes the sum non-finite
-                bad = [TRUTH_SIGNALS[i] for i in np.flatnonzero(~np.isfinite(np.array(xl)))[:3]]
+                bad = [truth_names[i] for i in np.flatnonzero(~np.isfinite(np.array(xl)))[:3]]
                 raise SimulationDiverged(t_s, f"non-finite state ({', '.join(bad)})")
             if h_agl_node() <= 0.0:
                 raise SimulationDiverged(t_s, "ground impact")

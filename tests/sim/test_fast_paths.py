@@ -11,7 +11,8 @@ import struct
 import numpy as np
 import pytest
 
-from fdi_sim.aircraft import SURFACE_SIGNALS, TRUTH_SIGNALS, Aircraft, Atmosphere, trim
+from fdi_sim.aircraft import SURFACE_SIGNALS, Aircraft, Atmosphere, trim
+from fdi_sim.aircraft.properties import truth_signals
 from fdi_sim.scenario import loads
 from fdi_sim.sim.run import build_sensors
 
@@ -44,7 +45,8 @@ def test_list_reader_equals_reader_bit_for_bit(name: str) -> None:
     ac = Aircraft(name, sc.dt_s)
     trim(ac, sc.operating_point())
     ac.set_atmosphere(Atmosphere("moderate"), 3)
-    for names in (TRUTH_SIGNALS, SURFACE_SIGNALS, ("thrust_lbf", "h_ft", "thrust_lbf")):
+    mixed = ("thrust_lbf", "h_ft", "thrust_lbf") + (("torque_1_ftlb", "thrust_lbf", "torque_0_ftlb") if name == "DHC6" else ())
+    for names in (truth_signals(name), SURFACE_SIGNALS, mixed):  # summed and scaled signals among plain ones
         fast, slow = ac.list_reader(names), ac.reader(names)
         for _ in range(30):
             ac.step()
@@ -55,6 +57,9 @@ def test_list_reader_equals_reader_bit_for_bit(name: str) -> None:
         t0, t1 = ac["propulsion/engine[0]/thrust-lbs"], ac["propulsion/engine[1]/thrust-lbs"]
         assert ac.list_reader(("thrust_lbf",))()[0] == t0 + t1
         assert t0 > 0.0 and t1 > 0.0
+        # the scaled signal: the gauge's torque is minus the propeller's reaction torque
+        q0 = ac["propulsion/engine[0]/propeller-torque-ftlb"]
+        assert ac.list_reader(("torque_0_ftlb",))()[0] == -q0 and -q0 > 0.0
     with pytest.raises(KeyError):
         ac.list_reader(("no_such_signal",))
 
@@ -66,9 +71,10 @@ def test_sensor_step_list_equals_step(name: str) -> None:
     a.reset(np.random.default_rng(11))
     b.reset(np.random.default_rng(11))
     rng = np.random.default_rng(2)
-    x0 = rng.normal(size=len(TRUTH_SIGNALS)) * 100.0
+    n_truth = len(truth_signals(name))
+    x0 = rng.normal(size=n_truth) * 100.0
     for k in range(300):  # past two noise blocks and every sensor's sample phase
-        x = x0 + rng.normal(size=len(TRUTH_SIGNALS))
+        x = x0 + rng.normal(size=n_truth)
         y_slow = a.step(k * sc.dt_s, x).y
         y_fast = b.step_list(k * sc.dt_s, x.tolist())
         assert _bits(y_fast) == y_slow.tobytes()
