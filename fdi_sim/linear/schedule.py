@@ -226,6 +226,16 @@ class ModelSchedule:
         lo, hi = self._X.min(axis=0), self._X.max(axis=0)
         return float(np.sqrt(np.sum((np.maximum(0.0, np.maximum(lo - s, s - hi)) / self._spacing) ** 2)))
 
+    def continuous_at(self, op: OperatingPoint) -> LinearModel:
+        """The continuous model of the grid point nearest ``op`` (before any discretization).
+
+        For designs that change the continuous model first (e.g. adding the rotational
+        turbulence columns of :func:`fdi_sim.detectors.disturbance.rotational_turbulence_inputs`).
+        """
+        found = self.model_at(op, dt_s=DEFAULT_DT_S)
+        (row,) = found.indices
+        return replace(self._model(self._blend([self.points[row].index], [1.0]), op), op=op)
+
     def model_at(self, op: OperatingPoint, dt_s: float = DEFAULT_DT_S, method: str = "zoh",
                  interpolate: bool = False, max_distance: float = MAX_DISTANCE, reduced: bool = False
                  ) -> ScheduledModel:
