@@ -416,8 +416,10 @@ class KinematicDetector:
             d_att = att[n:] - att[:-n]
             d_att[:, 2] = _wrap(d_att[:, 2])
             e[n:] = d_att - (I[n:] - I[:-n])
-        # e = E b T  ->  b_hat = E^-1 e / T (the equivalent gyro bias)
-        b = np.linalg.solve(_euler_matrix(phi, theta), np.nan_to_num(e)[:, :, None])[:, :, 0] / (n * dt)
+        # e = E b T  ->  b_hat = E^-1 e / T (the equivalent gyro bias); only the new rows are returned
+        b = np.full_like(e, np.nan)
+        E = _euler_matrix(phi[L0:], theta[L0:])
+        b[L0:] = np.linalg.solve(E, np.nan_to_num(e[L0:])[:, :, None])[:, :, 0] / (n * dt)
         b[~np.isfinite(e).all(axis=1)] = np.nan
         b[~self._valid_window(c["_ok"], n)] = np.nan
         return b
@@ -427,11 +429,9 @@ class KinematicDetector:
         h, hd = c["h_ft"], c["hdot_fps"]
         fresh = (c["_gnss"] > 0.5) & (c["_ok"] > 0.5)
         rows = np.flatnonzero(fresh)
-        if rows.size == 0:
-            return np.full((len(h), 2), np.nan)
         # v_down between its own samples: linear (the GNSS rate is below the detector rate; using the
         # held value would add a lag of up to one GNSS period, 0.8 ft/s in a 0.5 g pull-up)
-        vd = np.interp(np.arange(len(h)), rows, c["v_down_fps"][rows])
+        vd = np.interp(np.arange(len(h)), rows, c["v_down_fps"][rows]) if rows.size else np.full(len(h), np.nan)
         I = np.cumsum(np.concatenate([[0.0], 0.5 * (vd[1:] + vd[:-1]) * dt]))
         raw = np.full((len(h), 2), np.nan)
         if len(h) > n:
