@@ -21,7 +21,7 @@ import numpy as np
 from scipy.stats import beta
 
 from fdi_sim.detectors.kinematic import KinematicDetector, MeasurementSet, empirical_threshold
-from fdi_sim.detectors.catalogue_kinematic import KINDS, SCALES, design
+from fdi_sim.detectors.catalogue_kinematic import KINDS, design
 from fdi_sim.detectors.samples import log_samples
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import loads

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -69,7 +69,6 @@ MEASUREMENTS: tuple[str, ...] = (
     "alpha_rad", "beta_rad", "h_ft", "hdot_fps", "v_north_fps", "v_east_fps", "v_down_fps",
 )
 GNSS = ("v_north_fps", "v_east_fps", "v_down_fps")
-_GAMMA_AIR = 1.4
 _P0_PSF = isa(0.0).pressure_psf
 _A0_FPS = isa(0.0).sound_speed_fps
 
@@ -524,13 +523,3 @@ def _moving_mean(x: NDArray[np.float64], n: int) -> NDArray[np.float64]:
         nb = np.concatenate([[0], np.cumsum(bad)])
         out[n - 1:] = np.where(nb[n:] - nb[:-n] == 0, (c[n:] - c[:-n]) / n, np.nan)
     return out
-
-
-def design_for(kind: str, aircraft: str | None, table: Mapping[tuple[str, str], KinematicDesign],
-               **overrides: Any) -> KinematicDesign:
-    """The calibrated design of ``kind`` for an aircraft (``table``), with overrides applied."""
-    from dataclasses import replace
-
-    key = (kind, (aircraft or "").lower())
-    base = table.get(key) or table.get((kind, "")) or KinematicDesign(kind)
-    return replace(base, **overrides) if overrides else base
