@@ -152,3 +152,35 @@ register("detector", "kalman-nis-v1", "Steady-state Kalman filter, NIS / bias / 
 register("detector", "kalman-tv-nis-v1", "Time-varying Kalman filter with the NIS chi-square test", make_kalman_tv)
 register("detector", "kalman-mmae-v1", "Multiple-model Kalman bank with hypothesis probabilities (select the model that fits)", make_mmae)
 register("detector", "adaptive-observer-v1", "Sidar's adaptive tracking observer; parameter estimates flag slow degradation", make_adaptive_observer)
+
+
+#: wing spans [ft] as JSBSim's ``metrics/bw-ft`` reports them (the rotational turbulence scales
+#: with them; checked against JSBSim in tests/detectors/test_gust_kalman.py)
+WINGSPAN_FT: dict[str, float] = {"f16": 30.0, "DHC6": 65.0}
+
+
+def make_gust_kalman(model: LinearModel, calibration: Any = None, turbulence: str = "moderate", rate_hz: float = 20.0,
+                     sim_rate_hz: float = 120.0, psiw_rad: float = 0.0, min_cosine: float = 0.7,
+                     bias_drift: float = 1e-3, window_s: float = 1.0, use_analytic_threshold: bool = False):
+    """Kalman filter with JSBSim's Dryden gusts and turn-on bias states, windowed innovation test,
+    GLR-style signature isolation (``fdi_sim.detectors.gust_kalman``). ``calibration`` (a
+    :class:`~fdi_sim.detectors.gust_kalman.Calibration` or its dict) comes from fault-free
+    training flights: :func:`fdi_sim.sim.calibrate.calibrated_gust_kalman` flies them."""
+    from fdi_sim.detectors.gust_kalman import Calibration, GustKalmanDetector, SensorNoise, design_gust_kalman
+    from fdi_sim.sensors import load_suite
+
+    aircraft = (model.meta or {}).get("aircraft")
+    if aircraft not in WINGSPAN_FT:
+        raise DesignError(f"kalman-gust-v1 needs model.meta['aircraft'] in {sorted(WINGSPAN_FT)} (sensor suite, "
+                          f"wing span); got {aircraft!r}")
+    sensors = {s.name: SensorNoise(s.noise_std, s.bias_std, s.quantum or 0.0) for s in load_suite(aircraft)}
+    design = design_gust_kalman(model, rate_hz=rate_hz, sim_rate_hz=sim_rate_hz, turbulence=turbulence,
+                                wingspan_ft=WINGSPAN_FT[aircraft], sensors=sensors, psiw_rad=psiw_rad,
+                                bias_drift=bias_drift, window_s=window_s)
+    if isinstance(calibration, Mapping):
+        calibration = Calibration.from_dict(calibration)
+    return GustKalmanDetector(design, calibration, min_cosine=min_cosine, use_analytic_threshold=use_analytic_threshold)
+
+
+register("detector", "kalman-gust-v1", "Kalman filter with JSBSim's Dryden gusts and sensor-bias states, 1 s windowed "
+         "innovation test calibrated on fault-free flights, signature isolation with reject", make_gust_kalman)

@@ -175,14 +175,22 @@ def fault_windows(log: FlightLog) -> list[dict[str, Any]]:
     return []
 
 
-def model_for_log(log: FlightLog, rate_hz: float):
-    """Trim and linearize the log's initial point; the model at ``rate_hz`` in the samples' form.
+@dataclass(frozen=True, eq=False)
+class LogModel:
+    """What a log's detectors are designed from."""
 
-    Returns
-    -------
-    (LinearModel, str)
-        The paired discrete model and the aircraft id.
-    """
+    scenario: Any
+    schedule: Any
+    model: Any
+    aircraft: str
+
+    def continuous(self) -> Any:
+        """The continuous linearization at the log's initial point."""
+        return self.schedule.continuous_at(self.scenario.operating_point())
+
+
+def model_for_log(log: FlightLog, rate_hz: float) -> LogModel:
+    """Trim and linearize the log's initial point; the model at ``rate_hz`` in the samples' form."""
     from fdi_sim.linear.grid import parse_grid_spec
     from fdi_sim.linear.linearize import linearize_grid
     from fdi_sim.scenario.loader import from_dict
@@ -200,11 +208,17 @@ def model_for_log(log: FlightLog, rate_hz: float):
     sched = linearize_grid(parse_grid_spec(spec, sc.aircraft), validate=False)
     found = sched.model_at(sc.operating_point(), dt_s=1.0 / rate_hz)
     sim_rate_hz = float(meta.get("rate_hz", sc.model.rate_hz))
-    return paired_model(found.model, sim_rate_hz), sc.aircraft
+    return LogModel(sc, sched, paired_model(found.model, sim_rate_hz), sc.aircraft)
 
 
 def build_detector(spec: DetectorSpec, model: Any) -> Any:
     """Design one registered detector from ``model``; unknown options get a "did you mean"."""
+    check_options(spec)
+    return registry.get("detector", spec.id).factory(model, **dict(spec.params))
+
+
+def check_options(spec: DetectorSpec, extra: Sequence[str] = ()) -> None:
+    """Refuse an option the detector's factory does not take (with a "did you mean")."""
     plugin = registry.get("detector", spec.id)
     try:
         sig = inspect.signature(plugin.factory)
@@ -212,13 +226,13 @@ def build_detector(spec: DetectorSpec, model: Any) -> Any:
         has_var = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
     except (TypeError, ValueError):
         known, has_var = [], True
+    known = [*known, *extra]
     for k in spec.params:
         if not has_var and k not in known:
             close = difflib.get_close_matches(k, known, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise ScenarioError("--detector", f"{spec.id}:{k}", f"unknown option {k!r}{hint}",
                                 f"options of {spec.id}: {', '.join(known)}")
-    return plugin.factory(model, **dict(spec.params))
 
 
 def run_detector(det: Any, ident: str, samples: Samples, model: Any) -> DetectorTrace:
@@ -247,6 +261,47 @@ def run_detector(det: Any, ident: str, samples: Samples, model: Any) -> Detector
     return DetectorTrace(ident, samples.t_s, stat, thr, alarm, valid, tuple(iso), cost)
 
 
+#: options of kalman-gust-v1's calibration (the rest go to its design)
+CALIBRATION_OPTIONS = ("n_flights", "duration_s", "target")
+
+
+def _run_spec(spec: DetectorSpec, lm: LogModel, log: FlightLog, samples: Samples, rate_hz: float,
+              rates: Mapping[str, float]) -> DetectorTrace:
+    """Design one detector for this log and run it (vectorised where the detector offers ``run``)."""
+    sc = lm.scenario
+    if spec.id == "kalman-gust-v1":  # designed at the log's point, calibrated on its fault-free flights
+        from fdi_sim.sim.calibrate import calibrated_gust_kalman
+
+        check_options(spec, extra=CALIBRATION_OPTIONS)
+        opts = {k: v for k, v in spec.params.items() if k in CALIBRATION_OPTIONS}
+        design_opts = {k: v for k, v in spec.params.items() if k not in CALIBRATION_OPTIONS + ("rate_hz",)}
+        det = calibrated_gust_kalman(sc, lm.continuous(), rate_hz=rate_hz, params=design_opts, **opts)
+        s = log_samples(log, det.design.model, rate_hz, sensor_rates_hz=rates)
+        t0 = time.perf_counter()
+        r = det.run(s)
+        cost = (time.perf_counter() - t0) / max(s.n, 1) * 1e6
+        return DetectorTrace(spec.id, r.t_s, r.statistic, np.full(s.n, det.threshold), r.alarm, r.valid,
+                             r.isolation, cost)
+    if spec.id.startswith("kinematic-"):  # measurement checks: absolute measurements, the log's conditions
+        from fdi_sim.detectors.kinematic import MeasurementSet
+
+        params = {"turbulence": sc.model.atmosphere.turbulence, "aircraft": sc.aircraft, **spec.params}
+        det = build_detector(DetectorSpec(spec.id, params), None)
+        s = log_samples(log, MeasurementSet(), rate_hz, sensor_rates_hz=rates)
+        t0 = time.perf_counter()
+        r = det.run(s)
+        cost = (time.perf_counter() - t0) / max(s.n, 1) * 1e6
+        thr = np.full(s.n, float(det.design.threshold))
+        return DetectorTrace(spec.id, r.t_s, r.statistic, thr, np.asarray(r.alarm, dtype=bool),
+                             np.asarray(r.valid, dtype=bool), tuple(r.isolation), cost)
+    det = build_detector(spec, lm.model)
+    return run_detector(det, spec.id, samples, lm.model)
+
+
+#: the isolation a fault is reported with: the most frequent one in this time after the first alarm
+ISOLATION_WINDOW_S = 1.0
+
+
 def _matches(isolation: str | None, target: str) -> bool | None:
     if isolation is None:
         return None
@@ -271,7 +326,9 @@ def outcome(trace: DetectorTrace, spec: DetectorSpec, faults: Sequence[Mapping[s
         idx = np.flatnonzero(a & (trace.t_s >= t_on))
         if idx.size:
             j = int(idx[0])
-            iso = trace.isolation[j]
+            during = [trace.isolation[k] for k in idx if trace.t_s[k] < trace.t_s[j] + ISOLATION_WINDOW_S]
+            named = [h for h in during if h is not None]
+            iso = max(set(named), key=named.count) if named else None
             outs.append(FaultOutcome(f["label"], f.get("target", ""), f.get("type", ""), t_on, float(trace.t_s[j]),
                                      float(trace.t_s[j] - t_on), iso, _matches(iso, f.get("target", ""))))
         else:
@@ -309,7 +366,8 @@ def detect_log(path: str | Path, specs: Sequence[DetectorSpec], rate_hz: float =
     if not specs:
         raise ScenarioError("--detector", "", "no detector given", "pass --detector ID (see `fdi-sim plugins`)")
     log = read_log(path)
-    model, aircraft = model_for_log(log, rate_hz)
+    lm = model_for_log(log, rate_hz)
+    model, aircraft = lm.model, lm.aircraft
     from fdi_sim.sensors import load_suite
 
     rates = {s.name: s.rate_hz for s in load_suite(aircraft)}
@@ -317,15 +375,15 @@ def detect_log(path: str | Path, specs: Sequence[DetectorSpec], rate_hz: float =
     faults = fault_windows(log)
     outcomes, traces = [], []
     for spec in specs:
+        registry.get("detector", spec.id)  # an unknown id is bad input, with its "did you mean"
         try:
-            det = build_detector(spec, model)
+            tr = _run_spec(spec, lm, log, samples, rate_hz, rates)
         except (DesignError, TypeError, ValueError) as exc:
             if isinstance(exc, ScenarioError):
                 raise
             outcomes.append(DetectorOutcome(spec.id, dict(spec.params), samples.n, 0, 0, 0.0, 0, 0.0, 0.0, 0, 0, 0.0, (),
                                             error=str(exc)))
             continue
-        tr = run_detector(det, spec.id, samples, model)
         traces.append(tr)
         outcomes.append(outcome(tr, spec, faults, rate_hz))
     out_path = None

@@ -140,6 +140,9 @@ def test_signal_before_the_flight_leaves_the_old_log(tmp_path: Path, sig: signal
         time.sleep(float(rng.uniform(0.05, 0.8)))  # imports take ~1 s, the trim follows
         proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=60)
+        if proc.returncode == -sig:  # it landed before Python ran any of our code: nothing to handle
+            assert log.read_bytes() == old
+            continue
         assert proc.returncode == 1, stderr
         assert "Traceback" not in stderr, stderr
         if "before the flight started" in stderr or stdout == "":
