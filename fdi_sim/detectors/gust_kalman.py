@@ -52,6 +52,8 @@ from fdi_sim.linear.transform import discretize
 
 #: per-step random walk of the bias states, as a fraction of the turn-on spread
 DEFAULT_BIAS_DRIFT = 1e-3
+#: allowed excess of the filter's spectral radius over 1 (marginal unobservable modes, rounding)
+RHO_MARGIN = 1e-4
 #: gains that change by less than this (relative, max abs) over one second count as settled
 GAIN_SETTLED = 1e-6
 
@@ -94,6 +96,7 @@ class GustKalmanDesign:
     hypotheses: tuple[str, ...]
     turbulence: str
     rate_hz: float
+    S: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
     notes: tuple[str, ...] = ()
 
 
@@ -211,18 +214,32 @@ def design_gust_kalman(model: LinearModel, *, rate_hz: float, sim_rate_hz: float
         P = 0.5 * (P + P.T)
         if j >= 2 * per_s and np.max(np.abs(gains[-1] - gains[-1 - per_s])) <= GAIN_SETTLED * np.max(np.abs(K)):
             break
+    S_steady = C @ P @ C.T + R  # the design's innovation covariance (steady)
     G = np.asarray(gains)
     Acl = A @ (np.eye(n) - G[-1] @ C)
     rho = float(np.max(np.abs(np.linalg.eigvals(Acl))))
-    if not rho < 1.0:
+    # Unobservable random-constant biases (a baro bias beside the altitude state, which only their
+    # sum reaches) keep eigenvalues at 1: they never reach the innovations. A double eigenvalue at 1
+    # moves by about sqrt(eps) ~ 1e-5 under rounding, so the test allows 1 + RHO_MARGIN.
+    if not rho <= 1.0 + RHO_MARGIN:
         raise DesignError(f"the filter is not stable (spectral radius {rho:.6f} of A(I - KC)); "
                           "check the model's observability")
+    notes.append(f"spectral radius of A(I - KC): {rho:.6f}")
     if len(gains) == J_max:
         notes.append(f"gains still changing after {max_gain_s:g} s: the last one is used from then on")
     ctrl = tuple(int(i) for i in np.flatnonzero([k == "control" for k in m.input_kinds]))
     window_n = max(1, int(round(window_s * rate_hz)))
     hyps, sig = _signatures(m, G[-1], ctrl, window_n)
-    return GustKalmanDesign(m, G, ctrl, window_n, sig, hyps, turbulence, float(rate_hz), tuple(notes))
+    return GustKalmanDesign(m, G, ctrl, window_n, sig, hyps, turbulence, float(rate_hz), 0.5 * (S_steady + S_steady.T),
+                            tuple(notes))
+
+
+def analytic_calibration(design: GustKalmanDesign, target_per_sample: float) -> Calibration:
+    """The calibration the design itself predicts: white innovations with covariance ``S``, so
+    the window mean has ``Sigma_m = S / W`` and ``T`` is chi-square with ``p`` degrees of freedom.
+    What fault-free flights say about it is in ``docs/detectors.md`` (it is far too low)."""
+    thr = float(chi2.ppf(1.0 - target_per_sample, design.model.n_outputs))
+    return Calibration(design.S / design.window_n, thr, thr, float(target_per_sample), 0, ("analytic: design covariance",))
 
 
 def _signatures(m: LinearModel, K: NDArray[np.float64], ctrl: Sequence[int], W: int
@@ -386,7 +403,8 @@ class GustKalmanDetector:
     def __init__(self, design: GustKalmanDesign, calibration: Calibration | None = None, *,
                  min_cosine: float = 0.7, use_analytic_threshold: bool = False) -> None:
         self.design = design
-        self.calibration = calibration
+        # without flights to calibrate on, the design's own prediction (analytic_calibration)
+        self.calibration = calibration if calibration is not None else analytic_calibration(design, 1e-4)
         self.min_cosine = float(min_cosine)
         self.use_analytic = bool(use_analytic_threshold)
         self.hypotheses = design.hypotheses
