@@ -90,9 +90,9 @@ def _cmd_repair(args: argparse.Namespace) -> int:
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:
-    from fdi_sim.sim.detect import DEFAULT_RATE_HZ, detect_log, parse_detector_arg
+    from fdi_sim.sim.detect import DEFAULT_RATE_HZ, bank_specs, detect_log, parse_detector_arg
 
-    specs = [parse_detector_arg(d) for d in (args.detector or [])]
+    specs = (bank_specs(args.bank) if args.bank else []) + [parse_detector_arg(d) for d in (args.detector or [])]
     rep, _ = detect_log(args.log, specs, rate_hz=args.rate_hz or DEFAULT_RATE_HZ, out=args.out)
     print(rep.to_json() if args.json else rep.format())
     return 0
@@ -125,6 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("log")
     d.add_argument("--detector", action="append", metavar="ID[:key=value,...]",
                    help="a registered detector id with design options (repeatable; `fdi-sim plugins`)")
+    d.add_argument("--bank", default=None, help="a named bank of detectors (default: the ones docs/detectors.md finds "
+                   "working on both aircraft)")
     d.add_argument("--rate-hz", type=float, default=None, help="detector rate [Hz], dividing the log's rate (default 20)")
     d.add_argument("--out", default=None, help="write the input's topics plus /fdi/... to this MCAP file")
     d.add_argument("--json", action="store_true", help="print the result as one JSON object")

@@ -18,6 +18,7 @@ from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_g
 from fdi_sim.detectors.beard_jones_filter import BeardJonesBank, BeardJonesFilter, plan_bank
 from fdi_sim.detectors.kalman import KalmanDesign, KalmanInnovationDetector, MultipleModelBank, TimeVaryingKalmanDetector, steady_state_kalman
 from fdi_sim.detectors.lmi_filter import LmiDetectionFilter, design_lmi_filter
+from fdi_sim.detectors.noise import suite_sensor_std
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.registry import register
@@ -45,7 +46,10 @@ def _controls(model: LinearModel) -> list[str]:
 
 
 def _noise(md: LinearModel, process_std: Any, sensor_std: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Diagonal process and sensor noise covariances per sample."""
+    """Diagonal process and sensor noise covariances per sample; the sensor noise defaults to the
+    aircraft's suite (:func:`fdi_sim.detectors.noise.suite_sensor_std`)."""
+    if sensor_std is None:
+        sensor_std = suite_sensor_std(md)
     return _diag(process_std, md.n_states, "process_std"), _diag(sensor_std, md.n_outputs, "sensor_std")
 
 
@@ -63,7 +67,7 @@ def make_beard_jones(model: LinearModel, faults: Sequence[str] | None = None, de
     Without ``process_std`` the residual covariance has no process noise (the filter's model is taken as exact).
     """
     faults = list(faults) if faults is not None else _controls(model)
-    R = _diag(sensor_std, model.n_outputs, "sensor_std")
+    R = _diag(sensor_std if sensor_std is not None else suite_sensor_std(model), model.n_outputs, "sensor_std")
     Q = _diag(process_std, model.n_states, "process_std") if process_std is not None else None
     designs = plan_bank(model, faults, detection_pole_radps=detection_pole_radps, completion_pole_radps=completion_pole_radps,
                         dt_s=None if model.is_discrete else _dt(model, dt_s), Q=Q, R=R)
@@ -85,7 +89,7 @@ def make_lmi_detection(model: LinearModel, fault: str | None = None, h_radps: fl
     if model.is_discrete:
         raise DesignError("lmi-detection-v1 is designed on a continuous model; pass the continuous linearization")
     fault = fault or _controls(model)[0]
-    R = _diag(sensor_std, model.n_outputs, "sensor_std")
+    R = _diag(sensor_std if sensor_std is not None else suite_sensor_std(model), model.n_outputs, "sensor_std")
     design = design_lmi_filter(model, fault, R, h_radps, epsilon=epsilon, method=method)  # V = R as noise weighting
     return LmiDetectionFilter(model, design, fault, _dt(model, dt_s), alpha=alpha, Rd=R)
 

@@ -19,6 +19,8 @@ from fdi_sim.detectors.stochastic_parity import (
     stochastic_parity,
 )
 from fdi_sim.detectors.window_detector import WindowParityDetector
+from fdi_sim.detectors.noise import suite_sensor_std
+from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.registry import register
 
@@ -52,6 +54,9 @@ def make_parity(
     """
     s = _order(model, order_s)
     space = parity_space(model, s)
+    if R is None and threshold is None:  # the aircraft's sensor suite (fdi_sim.detectors.noise)
+        std = suite_sensor_std(model)
+        R = None if std is None else np.diag(std ** 2)
     cov = None if R is None else space.W.T @ noise_window_covariance(model, s, R) @ space.W  # W'SW
     faults = _faults(model, actuators, sensors)
     return parity_detector(
@@ -83,7 +88,7 @@ def make_robust_parity(
 
 def make_stochastic_parity(
     model: LinearModel,
-    R: NDArray,
+    R: NDArray | None = None,
     order_s: int | None = None,
     Bv: NDArray | None = None,
     Q: NDArray | None = None,
@@ -93,7 +98,15 @@ def make_stochastic_parity(
     p_false_alarm: float = 0.05,
     reject_angle_rad: float = np.pi,
 ) -> WindowParityDetector:
-    """Hagenblad et al. Algorithm 1: normalized parity residual, chi-square test, angle isolation."""
+    """Hagenblad et al. Algorithm 1: normalized parity residual, chi-square test, angle isolation.
+
+    ``R`` defaults to the aircraft's sensor suite (:func:`fdi_sim.detectors.noise.suite_sensor_std`)."""
+    if R is None:
+        std = suite_sensor_std(model)
+        if std is None:
+            raise DesignError("parity-stochastic-v1 needs R (the measurement-noise covariance) for a model "
+                              "without meta['aircraft']")
+        R = np.diag(std ** 2)
     faults = _faults(model, actuators, sensors)
     if faults is None:
         # detection only: a zero-signature placeholder keeps the design code path single

@@ -92,7 +92,7 @@ def calibration_key(sc: Scenario, detector_id: str, params: Mapping[str, Any], r
 def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n_flights: int = DEFAULT_TRAINING_FLIGHTS,
                            duration_s: float = DEFAULT_TRAINING_S, target: float = DEFAULT_TARGET,
                            params: Mapping[str, Any] | None = None, use_cache: bool = True,
-                           progress: bool = True) -> GustKalmanDetector:
+                           progress: bool = True, training_logs: Sequence[Any] | None = None) -> GustKalmanDetector:
     """``kalman-gust-v1`` designed at the scenario's point and calibrated on its fault-free flights.
 
     Parameters
@@ -105,6 +105,9 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
         Detector rate [Hz], training flights, their length [s], per-sample target.
     params : mapping, optional
         Other options of :func:`fdi_sim.detectors.catalogue_observers.make_gust_kalman`.
+    training_logs : sequence of FlightLog, optional
+        The training flights already flown (seeds :func:`training_seeds`, ``duration_s``), for a
+        caller that needs them for other detectors too.
     """
     from fdi_sim.detectors.catalogue_observers import make_gust_kalman
 
@@ -122,7 +125,7 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
             cal = None  # a damaged cache entry is recomputed
     if cal is None or cal.sigma_m.shape != (det.design.model.n_outputs,) * 2:
         seeds = training_seeds(n_flights)
-        logs = fly_training(sc, seeds, duration_s, progress=progress)
+        logs = list(training_logs) if training_logs is not None else fly_training(sc, seeds, duration_s, progress=progress)
         flights = [log_samples(lg, det.design.model, rate_hz) for lg in logs]
         labels = [f"seed {s}, {duration_s:g} s, {sc.model.atmosphere.turbulence} turbulence, faults removed" for s in seeds]
         cal = calibrate(det.design, flights, target, labels)

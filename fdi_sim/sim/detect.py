@@ -34,6 +34,22 @@ from fdi_sim.flightlog.schemas import ALARM_JSON_SCHEMA, TOPIC_FDI_ALARMS
 DEFAULT_RATE_HZ = 20.0
 S_PER_H = 3600.0
 
+#: named banks: the detectors ``docs/detectors.md`` finds working on these aircraft (``--bank``).
+#: kalman-gust-v1 is calibrated on the log's own scenario (fault-free, 24 x 300 s, 1e-4 per sample);
+#: the kinematic checks carry their calibrated thresholds per aircraft and turbulence level.
+BANKS: dict[str, tuple[str, ...]] = {
+    "default": ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1"),
+}
+
+
+def bank_specs(name: str) -> list[DetectorSpec]:
+    """The detectors of a named bank."""
+    if name not in BANKS:
+        close = difflib.get_close_matches(name, list(BANKS), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ScenarioError("--bank", name, f"unknown bank {name!r}{hint}", f"one of {', '.join(BANKS)}")
+    return [DetectorSpec(i) for i in BANKS[name]]
+
 
 @dataclass(frozen=True)
 class DetectorSpec:

@@ -28,7 +28,7 @@ def gyro_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_detect_json_shape_and_out_log(gyro_log: Path, tmp_path: Path) -> None:
     out = tmp_path / "det.mcap"
     r = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "detect", str(gyro_log), "--detector",
-                        "kalman-nis-v1:sensor_std=0.01", "--detector", "parity-v1", "--json", "--out", str(out)],
+                        "kalman-nis-v1:sensor_std=0.01", "--detector", "kalman-mmae-v1", "--json", "--out", str(out)],
                        capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
@@ -43,7 +43,7 @@ def test_detect_json_shape_and_out_log(gyro_log: Path, tmp_path: Path) -> None:
     assert fault["label"] == "q_radps_bias" and fault["t_onset_s"] == 10.0
     for key in ("first_alarm_s", "isolated_as"):
         assert key in fault
-    assert par["error"], "parity-v1 without a threshold or cov_r refuses with its reason"
+    assert "alternatives" in par["error"], "kalman-mmae-v1 without alternative models refuses with its reason"
     # the out file: every input topic with its counts, plus the detector's statistic and the alarms
     src, det = read_log(gyro_log), read_log(out)
     for topic, n in src.message_counts.items():
@@ -78,3 +78,19 @@ def test_detect_bad_input(gyro_log: Path, tmp_path: Path, capsys: pytest.Capture
     assert "no 'scenario' metadata" in capsys.readouterr().err
     assert main(["detect", str(gyro_log), "--detector", "kalman-nis-v1", "--out", str(gyro_log)]) == 2
     assert "the output is the input log" in capsys.readouterr().err
+
+
+def test_default_bank_detects_and_isolates_the_gyro_bias(gyro_log: Path) -> None:
+    """`--bank default`: kalman-gust-v1 (calibrated on the scenario's fault-free flights) and the
+    kinematic attitude check both catch the pitch-gyro bias and name q_radps, with no alarm before it."""
+    r = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "detect", str(gyro_log), "--bank", "default", "--json"],
+                       capture_output=True, text=True, cwd=REPO)
+    assert r.returncode == 0, r.stderr
+    rep = {d["id"]: d for d in json.loads(r.stdout)["detectors"]}
+    assert set(rep) == {"kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1"}
+    for ident in ("kalman-gust-v1", "kinematic-attitude-v1"):
+        d = rep[ident]
+        (f,) = d["faults"]
+        assert d["fault_free_alarm_samples"] == 0, ident
+        assert f["first_alarm_s"] is not None and f["delay_s"] < 2.0, (ident, f)
+        assert f["isolated_as"] == "q_radps" and f["isolation_correct"], (ident, f)

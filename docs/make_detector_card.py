@@ -1,0 +1,71 @@
+"""Write docs/detectors.md: every registered detector on held-out fault-free flights and on every
+shipped fault scenario (protocol in fdi_sim/study/card.py).
+
+    python docs/make_detector_card.py                  # the card: 24 training + 8 held-out 300 s flights
+    python docs/make_detector_card.py --quick          # 6 + 8 flights of 120 s at a 1e-3 target, to try it
+    python docs/make_detector_card.py --part faults    # only the fault scenarios (or --part conditions)
+Results go to docs/card/*.json; the markdown and figures are made from them (--render).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parent
+OUT = DOCS / "card"
+FAULT_SCENARIOS = ("f16_stuck_elevator", "f16_pitch_gyro_bias", "f16_aileron_float", "f16_engine_flameout",
+                   "dhc6_airspeed_drift", "dhc6_intermittent_aoa", "dhc6_rudder_hardover", "dhc6_engine_flameout",
+                   "dhc6_elevator_loss", "dhc6_tail_icing")
+
+
+def _condition(args: tuple[str, str, int, float, float]) -> list[dict]:
+    from fdi_sim.study import card
+
+    ac, lvl, n, dur, target = args
+    rows = card.condition_card(ac, lvl, card.detector_ids(), n_train=n, duration_s=dur, target=target,
+                               say=lambda s: print(s, flush=True))
+    return card.to_json(rows)
+
+
+def _fault(args: tuple[str, int, float, float]) -> dict:
+    from fdi_sim.study import card
+
+    name, n, dur, target = args
+    rows, traces, thr = card.fault_card(DOCS.parent / "scenarios" / f"{name}.toml", card.detector_ids(), n_train=n,
+                                        duration_s=dur, target=target, say=lambda s: print(s, flush=True))
+    keep = {k: {"t_s": v.t_s.tolist(), "statistic": [None if x != x else float(x) for x in v.statistic],
+                "threshold": thr[k]} for k, v in traces.items() if k in ("kalman-gust-v1", "kinematic-attitude-v1",
+                                                                          "kinematic-airspeed-v1",
+                                                                          "kinematic-flow-angles-v1", "kalman-nis-v1")}
+    return {"scenario": name, "rows": card.to_json(rows), "traces": keep}
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--part", choices=("all", "conditions", "faults"), default="all")
+    p.add_argument("--render", action="store_true", help="only write the markdown and figures from docs/card/*.json")
+    p.add_argument("--workers", type=int, default=2)
+    a = p.parse_args()
+    n, dur, target = (6, 120.0, 1e-3) if a.quick else (24, 300.0, 1e-4)
+    OUT.mkdir(exist_ok=True)
+    if not a.render:
+        with ProcessPoolExecutor(a.workers) as ex:
+            if a.part in ("all", "conditions"):
+                jobs = [(ac, lvl, n, dur, target) for ac in ("f16", "DHC6") for lvl in ("none", "light", "moderate")]
+                rows = [r for res in ex.map(_condition, jobs) for r in res]
+                (OUT / "conditions.json").write_text(json.dumps({"n_train": n, "duration_s": dur, "rows": rows}, indent=1))
+            if a.part in ("all", "faults"):
+                res = list(ex.map(_fault, [(s, n, dur, target) for s in FAULT_SCENARIOS]))
+                (OUT / "faults.json").write_text(json.dumps({"n_train": n, "duration_s": dur, "results": res}))
+    from fdi_sim.review.detector_card import render
+
+    render(OUT, DOCS / "detectors.md", DOCS / "figures")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

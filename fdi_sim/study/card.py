@@ -1,0 +1,293 @@
+"""The detector card: every registered detector on fault-free flights it was not tuned on, and on
+every shipped fault scenario (``docs/make_detector_card.py`` writes ``docs/detectors.md``).
+
+Protocol
+--------
+- Conditions: each aircraft at its cruise scenario's point (F-16 10 kft / 400 KTAS, DHC-6
+  5000 ft / 120 KIAS, with the scenario's doublets), turbulence none, light and moderate.
+- Training flights: the scenario without faults, seeds ``1e6 + i`` (``fdi_sim.sim.calibrate``),
+  ``n_train`` x ``duration_s``. Held-out flights: seeds ``HELD_OUT_SEEDS`` (never used for any
+  calibration in the project: the kinematic checks were calibrated on seeds 1-8).
+- Every detector is designed at 20 Hz from the paired model of the point (``kalman-gust-v1`` and
+  ``lmi-detection-v1`` from the continuous one). Two thresholds: the detector's own (analytic for
+  the model-based ones, the shipped calibration for the kinematic checks), and the card's: the
+  empirical ``1 - target`` quantile of the statistic on the training flights.
+- False-alarm fraction per sample on the held-out flights with its Clopper-Pearson 95 % interval;
+  the detector meets the target if the count is at most the upper end of the binomial 95 %
+  interval of ``target x samples`` (fewer false alarms than the target is not a failure).
+- Fault scenarios: the scenario flown as shipped; each detector designed at its point,
+  calibrated on its own fault-free training flights at the same target; first alarm after the
+  onset, delay, isolation (most frequent hypothesis in the first second of alarm), alarms before
+  the onset.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from scipy import stats
+
+from fdi_sim import registry
+from fdi_sim.detectors.samples import log_samples
+from fdi_sim.errors import FdiSimError
+from fdi_sim.flightlog import read_log
+from fdi_sim.scenario import Scenario, load
+from fdi_sim.sim.calibrate import DEFAULT_TARGET, fault_free, fly_training, training_seeds
+from fdi_sim.sim.detect import (
+    ISOLATION_WINDOW_S, DetectorSpec, DetectorTrace, LogModel, _matches, build_detector, fault_windows, run_detector,
+)
+
+RATE_HZ = 20.0
+HELD_OUT_SEEDS: tuple[int, ...] = tuple(range(101, 109))
+LEVELS = ("none", "light", "moderate")
+CRUISE = {"f16": "f16_cruise_doublets", "DHC6": "dhc6_cruise_doublets"}
+#: detectors that need something the card cannot give them from a model alone
+NOT_APPLICABLE = {"kalman-mmae-v1": "needs alternative models (e.g. iced) as hypotheses: not a fault-free card entry"}
+
+
+@dataclass(frozen=True)
+class FalseAlarms:
+    """One detector in one condition, on the held-out flights."""
+
+    detector: str
+    aircraft: str
+    turbulence: str
+    target: float
+    samples: int
+    own_threshold_alarms: int
+    calibrated_alarms: int
+    calibrated_threshold: float
+    own_threshold: float
+    onsets_per_h: float
+    cost_us_per_sample: float
+    meets_target: bool
+    error: str = ""
+
+    @property
+    def fraction(self) -> float:
+        return self.calibrated_alarms / self.samples if self.samples else math.nan
+
+    @property
+    def own_fraction(self) -> float:
+        return self.own_threshold_alarms / self.samples if self.samples else math.nan
+
+
+@dataclass(frozen=True)
+class FaultResult:
+    """One detector on one shipped fault scenario (calibrated threshold)."""
+
+    scenario: str
+    detector: str
+    label: str
+    target: str
+    t_onset_s: float
+    alarms_before_onset: int
+    first_alarm_s: float | None
+    delay_s: float | None
+    isolated_as: str | None
+    isolation_correct: bool | None
+    error: str = ""
+
+
+def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact binomial interval of a proportion ``k / n``."""
+    a = (1.0 - level) / 2.0
+    lo = 0.0 if k == 0 else float(stats.beta.ppf(a, k, n - k + 1))
+    hi = 1.0 if k == n else float(stats.beta.ppf(1.0 - a, k + 1, n - k))
+    return lo, hi
+
+
+def binomial_upper(n: int, p: float, level: float = 0.95) -> int:
+    """Upper end of the central binomial interval of counts for ``n`` samples at probability ``p``."""
+    return int(stats.binom.ppf(1.0 - (1.0 - level) / 2.0, n, p))
+
+
+def detector_ids() -> list[str]:
+    registry.load_builtin_plugins()
+    return sorted(s.id for s in registry.all_plugins() if s.kind == "detector")
+
+
+def _log_model(sc: Scenario) -> LogModel:
+    from fdi_sim.detectors.samples import paired_model
+    from fdi_sim.linear.grid import parse_grid_spec
+    from fdi_sim.linear.linearize import linearize_grid
+
+    ini = sc.model.initial
+    spec = f"h_ft={ini.h_ft};" + (f"vt_kts={ini.vt_kts}" if ini.vt_kts else f"vc_kts={ini.vc_kts}")
+    if ini.flaps_deg:
+        spec += f";flaps_deg={ini.flaps_deg}"
+    sched = linearize_grid(parse_grid_spec(spec, sc.aircraft), validate=False)
+    found = sched.model_at(sc.operating_point(), dt_s=1.0 / RATE_HZ)
+    return LogModel(sc, sched, paired_model(found.model, sc.model.rate_hz), sc.aircraft)
+
+
+class _Runner:
+    """Designs one detector for a scenario and runs it over logs: statistic traces."""
+
+    def __init__(self, ident: str, lm: LogModel, training: Sequence[Any], target: float) -> None:
+        self.id, self.lm, self.target = ident, lm, target
+        sc = lm.scenario
+        self._measure = None
+        if ident == "kalman-gust-v1":
+            from fdi_sim.sim.calibrate import calibrated_gust_kalman
+
+            self.det = calibrated_gust_kalman(sc, lm.continuous(), rate_hz=RATE_HZ, n_flights=len(training),
+                                              target=target, training_logs=training, progress=False)
+            self._model = self.det.design.model
+        elif ident.startswith("kinematic-"):
+            from fdi_sim.detectors.kinematic import MeasurementSet
+
+            self.det = build_detector(DetectorSpec(ident, {"turbulence": sc.model.atmosphere.turbulence,
+                                                           "aircraft": sc.aircraft}), None)
+            self._model = MeasurementSet()
+        elif ident == "lmi-detection-v1":
+            self.det = build_detector(DetectorSpec(ident, {"dt_s": 1.0 / RATE_HZ}), lm.continuous())
+            self._model = lm.model
+        elif ident == "pca-v1":
+            s = log_samples(training[0], lm.model, RATE_HZ)
+            cols = [list(lm.model.input_names).index(n) for n in s.input_names]
+            u_abs = s.du + np.asarray(lm.model.u0)[cols]
+            self.det = build_detector(DetectorSpec(ident, {"train_u": u_abs, "train_y": s.dy + s.y0}), lm.model)
+            self._model = lm.model
+        else:
+            self.det = build_detector(DetectorSpec(ident, {}), lm.model)
+            self._model = lm.model
+
+    def trace(self, log: Any) -> DetectorTrace:
+        s = log_samples(log, self._model, RATE_HZ)
+        if hasattr(self.det, "run") and not self.id.startswith("kinematic-"):
+            t0 = time.perf_counter()
+            r = self.det.run(s)
+            cost = (time.perf_counter() - t0) / max(s.n, 1) * 1e6
+            return DetectorTrace(self.id, r.t_s, r.statistic, np.full(s.n, self.det.threshold), r.alarm, r.valid,
+                                 tuple(r.isolation), cost)
+        if self.id.startswith("kinematic-"):
+            t0 = time.perf_counter()
+            r = self.det.run(s)
+            cost = (time.perf_counter() - t0) / max(s.n, 1) * 1e6
+            return DetectorTrace(self.id, r.t_s, r.statistic, np.full(s.n, float(self.det.design.threshold)),
+                                 np.asarray(r.alarm, dtype=bool), np.asarray(r.valid, dtype=bool), tuple(r.isolation),
+                                 cost)
+        return run_detector(self.det, self.id, s, self._model)
+
+
+def calibrated_threshold(traces: Sequence[DetectorTrace], target: float) -> float:
+    """Empirical ``1 - target`` quantile of the valid statistics."""
+    x = np.concatenate([t.statistic[t.valid & np.isfinite(t.statistic)] for t in traces])
+    if x.size * target < 5:
+        return math.nan
+    return float(np.quantile(x, 1.0 - target))
+
+
+def _alarm(tr: DetectorTrace, thr: float) -> np.ndarray:
+    return tr.valid & np.isfinite(tr.statistic) & (np.nan_to_num(tr.statistic, nan=-np.inf) > thr)
+
+
+def condition_card(aircraft: str, turbulence: str, ids: Sequence[str], *, n_train: int, duration_s: float,
+                   target: float = DEFAULT_TARGET, held_out: Sequence[int] = HELD_OUT_SEEDS,
+                   say: Callable[[str], None] = print) -> list[FalseAlarms]:
+    """False alarms of every detector at one condition (module docstring)."""
+    sc = cruise_scenario(aircraft, turbulence, duration_s)
+    t0 = time.perf_counter()
+    training = fly_training(sc, training_seeds(n_train), duration_s, progress=False)
+    held = fly_training(sc, held_out, duration_s, progress=False)
+    say(f"{aircraft} {turbulence}: {len(training)} + {len(held)} flights in {time.perf_counter() - t0:.0f} s")
+    lm = _log_model(sc)
+    out = []
+    for ident in ids:
+        t1 = time.perf_counter()
+        if ident in NOT_APPLICABLE:
+            out.append(FalseAlarms(ident, aircraft, turbulence, target, 0, 0, 0, math.nan, math.nan, math.nan, 0.0,
+                                   False, NOT_APPLICABLE[ident]))
+            continue
+        try:
+            runner = _Runner(ident, lm, training, target)
+            tr_train = [runner.trace(lg) for lg in training]
+            tr_held = [runner.trace(lg) for lg in held]
+        except (FdiSimError, ValueError, TypeError, np.linalg.LinAlgError) as exc:
+            out.append(FalseAlarms(ident, aircraft, turbulence, target, 0, 0, 0, math.nan, math.nan, math.nan, 0.0,
+                                   False, f"{type(exc).__name__}: {exc}"[:300]))
+            say(f"  {ident:26} not designed: {str(exc)[:120]}")
+            continue
+        thr = calibrated_threshold(tr_train, target)
+        n = int(sum(int(t.valid.sum()) for t in tr_held))
+        own = float(np.nanmedian(np.concatenate([t.threshold for t in tr_held]))) if tr_held else math.nan
+        k_own = int(sum(int(_alarm(t, own).sum()) for t in tr_held)) if math.isfinite(own) else n
+        alarms = [_alarm(t, thr) for t in tr_held]
+        k = int(sum(int(a.sum()) for a in alarms))
+        onsets = sum(int(np.count_nonzero(a[1:] & ~a[:-1]) + int(a[0])) for a in alarms if len(a))
+        hours = sum(len(t.t_s) for t in tr_held) / RATE_HZ / 3600.0
+        cost = float(np.median([t.cost_us_per_sample for t in tr_held]))
+        meets = bool(n > 0 and math.isfinite(thr) and k <= binomial_upper(n, target))
+        out.append(FalseAlarms(ident, aircraft, turbulence, target, n, k_own, k, thr, own, onsets / hours if hours else 0.0,
+                               cost, meets))
+        say(f"  {ident:26} held-out {k}/{n} ({k / max(n, 1):.1e}) calibrated, {k_own} with its own threshold; "
+            f"{'meets' if meets else 'misses'} {target:g}  [{time.perf_counter() - t1:.0f} s]")
+    return out
+
+
+def cruise_scenario(aircraft: str, turbulence: str, duration_s: float) -> Scenario:
+    from fdi_sim.scenario.loader import from_dict
+
+    sc = load(Path(__file__).resolve().parents[2] / "scenarios" / f"{CRUISE[aircraft]}.toml")
+    data = json.loads(sc.to_json())
+    data["atmosphere"]["turbulence"] = turbulence
+    data["duration_s"] = float(duration_s)
+    return from_dict(data, source=f"{sc.source} (turbulence {turbulence})")
+
+
+def fault_card(scenario_path: str | Path, ids: Sequence[str], *, n_train: int, duration_s: float,
+               target: float = DEFAULT_TARGET, say: Callable[[str], None] = print
+               ) -> tuple[list[FaultResult], dict[str, DetectorTrace], dict[str, float]]:
+    """Every detector on one shipped fault scenario; also the traces and thresholds (for figures)."""
+    import tempfile
+
+    from fdi_sim.sim.run import run
+
+    sc = load(scenario_path)
+    with tempfile.TemporaryDirectory() as tmp:
+        log = read_log(run(sc, tmp, progress=False).log_path)
+    training = fly_training(sc, training_seeds(n_train), duration_s, progress=False)
+    lm = _log_model(sc)
+    faults = fault_windows(log)
+    out, traces, thresholds = [], {}, {}
+    for ident in ids:
+        if ident in NOT_APPLICABLE:
+            continue
+        try:
+            runner = _Runner(ident, lm, training, target)
+            thr = calibrated_threshold([runner.trace(lg) for lg in training], target)
+            tr = runner.trace(log)
+        except (FdiSimError, ValueError, TypeError, np.linalg.LinAlgError) as exc:
+            for f in faults:
+                out.append(FaultResult(sc.name, ident, f["label"], f.get("target", ""), float(f["windows_s"][0][0]),
+                                       0, None, None, None, None, f"{type(exc).__name__}: {exc}"[:200]))
+            continue
+        traces[ident], thresholds[ident] = tr, thr
+        alarm = _alarm(tr, thr) if math.isfinite(thr) else np.zeros(len(tr.t_s), dtype=bool)
+        for f in faults:
+            t_on = float(f["windows_s"][0][0])
+            before = int((alarm & (tr.t_s < t_on)).sum())
+            idx = np.flatnonzero(alarm & (tr.t_s >= t_on))
+            if idx.size:
+                j = int(idx[0])
+                named = [tr.isolation[k] for k in idx if tr.t_s[k] < tr.t_s[j] + ISOLATION_WINDOW_S
+                         and tr.isolation[k] is not None]
+                iso = max(set(named), key=named.count) if named else None
+                res = FaultResult(sc.name, ident, f["label"], f.get("target", ""), t_on, before, float(tr.t_s[j]),
+                                  float(tr.t_s[j] - t_on), iso, _matches(iso, f.get("target", "")))
+            else:
+                res = FaultResult(sc.name, ident, f["label"], f.get("target", ""), t_on, before, None, None, None, None)
+            out.append(res)
+            say(f"  {sc.name:24} {ident:26} before {before:3d}  delay "
+                f"{'-' if res.delay_s is None else f'{res.delay_s:.2f} s':>8}  isolated {res.isolated_as}")
+    return out, traces, thresholds
+
+
+def to_json(rows: Sequence[Any]) -> list[dict[str, Any]]:
+    return [asdict(r) for r in rows]
