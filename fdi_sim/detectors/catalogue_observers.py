@@ -18,7 +18,7 @@ from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_g
 from fdi_sim.detectors.beard_jones_filter import BeardJonesBank, BeardJonesFilter, plan_bank
 from fdi_sim.detectors.kalman import KalmanDesign, KalmanInnovationDetector, MultipleModelBank, TimeVaryingKalmanDetector, steady_state_kalman
 from fdi_sim.detectors.lmi_filter import LmiDetectionFilter, design_lmi_filter
-from fdi_sim.detectors.noise import suite_sensor_std
+from fdi_sim.detectors.noise import WINGSPAN_FT, suite_sensor_std
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.registry import register
@@ -156,11 +156,6 @@ register("detector", "kalman-nis-v1", "Steady-state Kalman filter, NIS / bias / 
 register("detector", "kalman-tv-nis-v1", "Time-varying Kalman filter with the NIS chi-square test", make_kalman_tv)
 register("detector", "kalman-mmae-v1", "Multiple-model Kalman bank with hypothesis probabilities (select the model that fits)", make_mmae)
 register("detector", "adaptive-observer-v1", "Sidar's adaptive tracking observer; parameter estimates flag slow degradation", make_adaptive_observer)
-
-
-#: wing spans [ft] as JSBSim's ``metrics/bw-ft`` reports them (the rotational turbulence scales
-#: with them; checked against JSBSim in tests/detectors/test_gust_kalman.py)
-WINGSPAN_FT: dict[str, float] = {"f16": 30.0, "DHC6": 65.0}
 
 
 def make_gust_kalman(model: LinearModel, calibration: Any = None, turbulence: str = "moderate", rate_hz: float = 20.0,

@@ -19,7 +19,7 @@ from fdi_sim.detectors.stochastic_parity import (
     stochastic_parity,
 )
 from fdi_sim.detectors.window_detector import WindowParityDetector
-from fdi_sim.detectors.noise import suite_sensor_std
+from fdi_sim.detectors.noise import gust_sqrt, suite_sensor_std
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.registry import register
@@ -74,14 +74,26 @@ def make_robust_parity(
     weights: Sequence[float] | None = None,
     threshold: float | None = None,
     p_false_alarm: float = 0.05,
+    turbulence: str = "moderate",
     **design: Any,
 ) -> WindowParityDetector:
     """The p most robust relations over ``[model, *perturbed]`` (Lou et al. 1986, sec. 3-4.2).
 
     ``design`` passes ``state_sqrt``, ``inputs``, ``input_sqrt``, ``disturbance_sqrt``,
     ``measurement_sqrt``, ``output_scale``, ``input_scale`` to :func:`robust_parity`. The statistic
-    is whitened by the design's average residual covariance.
+    is whitened by the design's average residual covariance. Defaults from the aircraft
+    (``fdi_sim.detectors.noise``): the measurement noise of its sensor suite, and the gust columns
+    sized by JSBSim's Dryden intensities at the model's trim for ``turbulence`` (the same
+    disturbance directions ``kalman-gust-v1`` carries as states, here as white noise).
     """
+    if "measurement_sqrt" not in design:
+        std = suite_sensor_std(model)
+        if std is not None:
+            design["measurement_sqrt"] = np.diag(std)
+    if "disturbance_sqrt" not in design:
+        g = gust_sqrt(model, turbulence)
+        if g is not None and g.shape[0] == int(np.sum([k == "disturbance" for k in model.input_kinds])):
+            design["disturbance_sqrt"] = np.maximum(g, 1e-6 * np.eye(len(g)))  # calm air: tiny, not singular
     d = robust_parity([model, *perturbed], _order(model, order_s), n_relations, weights, **design)
     return make_robust_parity_detector(model, d, threshold=threshold, p_false_alarm=p_false_alarm)
 

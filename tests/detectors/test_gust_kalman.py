@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fdi_sim.aircraft import Aircraft
-from fdi_sim.detectors.catalogue_observers import WINGSPAN_FT
+from fdi_sim.detectors.noise import WINGSPAN_FT
 from fdi_sim.detectors.gust_kalman import analytic_calibration
 from fdi_sim.detectors.samples import log_samples
 from fdi_sim.flightlog import read_log
