@@ -4,6 +4,15 @@ A detector is designed from a :class:`~fdi_sim.linear.model.LinearModel` (or a s
 then run with ``reset(rng)`` / ``step(t_s, u, y) -> Residual``. ``u`` and ``y`` are absolute
 values in the model's input and output order; a detector built from a model subtracts the
 model's trim values ``u0``/``y0`` itself.
+
+Time convention (the one rule; measured and applied by :mod:`fdi_sim.detectors.samples`): the
+log's row k holds y(t_k), read before JSBSim's step k, and the command u_k written before that
+step. Detector sample j at rate R = f_sim / n pairs the command *averaged over the interval
+ending at t_j* (rows (j-1)n .. jn-1) with the measurement y(t_j) (row jn); at n = 1 that is
+(u_{k-1}, y_k). Every detector is designed from ``paired_model(model, f_sim)``, which puts a ZOH
+model in the standard form x_{j+1} = A x_j + B u_j, y_j = C x_j + D u_j for these pairs, and is
+fed ``samples_from_arrays`` / ``log_samples`` output: signals by name, trim subtracted, heading
+wrapped, dropouts flagged invalid. No detector asks its user to pad or reorder columns.
 """
 from __future__ import annotations
 
