@@ -70,7 +70,11 @@ def best_per_scenario(data: dict[str, Any]) -> list[str]:
         rows = [r for r in res["rows"] if not r["error"] and r["delay_s"] is not None and r["alarms_before_onset"] == 0]
         rows.sort(key=lambda r: r["delay_s"])
         label = res["rows"][0]["label"] if res["rows"] else ""
-        cells = ", ".join(f"{r['detector']} {r['delay_s']:.2f} s ({r['isolated_as'] or 'rejected'})" for r in rows[:4])
+        def iso(r: dict[str, Any]) -> str:
+            mark = "" if r["isolation_correct"] is None else (", right" if r["isolation_correct"] else ", wrong")
+            return f"{r['isolated_as'] or 'rejected'}{mark}"
+
+        cells = "; ".join(f"{r['detector']} {r['delay_s']:.2f} s ({iso(r)})" for r in rows)
         lines.append(f"| {res['scenario']} | {label} | {cells or '**none**'} |")
     return lines
 

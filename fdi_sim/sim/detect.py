@@ -319,9 +319,17 @@ ISOLATION_WINDOW_S = 1.0
 
 
 def _matches(isolation: str | None, target: str) -> bool | None:
-    if isolation is None:
+    """Whether an isolated hypothesis names the fault's target (None: nothing to compare).
+
+    Hypotheses are signal names: a surface's command (``elevator_cmd_norm`` for ``elevator``), an
+    engine's thrust through the throttle (``throttle_cmd_norm`` for ``engine_<i>`` and
+    ``throttle``), a sensor by its name. Icing (``airframe``) has no hypothesis in any bank: None.
+    """
+    if isolation is None or target in ("airframe", ""):
         return None
-    return isolation == target or isolation.startswith(target + "_") or isolation.startswith(target)
+    if target.startswith("engine_") or target == "throttle":
+        return isolation == "throttle_cmd_norm" or isolation.startswith(("n1_", "torque_", "prop_"))
+    return isolation == target or isolation.startswith(target + "_")
 
 
 def outcome(trace: DetectorTrace, spec: DetectorSpec, faults: Sequence[Mapping[str, Any]], rate_hz: float) -> DetectorOutcome:
