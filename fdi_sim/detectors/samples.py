@@ -76,6 +76,9 @@ TOPIC_SENSORS = "/sensors/measurements"
 TOPIC_SENSORS_VALID = "/sensors/valid"
 #: outputs that are angles on a circle (wrapped after trim subtraction)
 WRAPPED_OUTPUTS = ("psi_rad",)
+#: signals a model may use that the log holds per engine: their mean (the linearizer's engine
+#: state is one N1 for both PT6As; a measured input for a model with ``state_as_input``)
+DERIVED_MEASUREMENTS: dict[str, tuple[str, ...]] = {"n1_pct": ("n1_0_pct", "n1_1_pct"), "prop_rpm": ("prop_0_rpm", "prop_1_rpm")}
 
 
 class SampleError(DesignError):
@@ -280,10 +283,16 @@ def samples_from_arrays(sim_rate_hz: float, u_names: Sequence[str], u: NDArray[n
     ctrl = [i for i, nm in enumerate(m_inputs) if (kinds[i] == "control" if kinds else True)]
     in_names = tuple(m_inputs[i] for i in ctrl)
     out_names = tuple(model.output_names)
-    ui = _columns(u_names, in_names, "command", TOPIC_COMMANDS)
-    yi = _columns(y_names, out_names, "measurement", TOPIC_SENSORS)
+    # a known input is a logged command, or else a measured signal (an engine gauge used as the
+    # input of the airframe model): both are averaged over the interval ending at t_j
     u = np.asarray(u, dtype=float)
     y = np.asarray(y, dtype=float)
+    from_y = [nm for nm in in_names if nm not in u_names and nm in y_names]
+    if from_y:
+        u = np.hstack([u, y[:, [list(y_names).index(nm) for nm in from_y]]])
+        u_names = tuple(u_names) + tuple(from_y)
+    ui = _columns(u_names, in_names, "command", TOPIC_COMMANDS)
+    yi = _columns(y_names, out_names, "measurement", TOPIC_SENSORS)
     rows, u_mean = pair_samples(u[:, ui], y[:, yi], n)
     u0 = np.asarray(model.u0, dtype=float)[ctrl]
     y0 = np.asarray(model.y0, dtype=float)
@@ -352,14 +361,20 @@ def log_samples(log: Any, model: Any, rate_hz: float, *,
     u_names = tuple(f for f in cmd.fields if f != "t_s")
     y_names = tuple(f for f in meas.fields if f != "t_s")
     u = np.column_stack([cmd[f][:K] for f in u_names])
-    y = np.column_stack([meas[f][:K] for f in y_names])
+    cols = [meas[f][:K] for f in y_names]
+    for name, parts in DERIVED_MEASUREMENTS.items():
+        if name not in y_names and all(p in y_names for p in parts):
+            cols.append(np.mean([meas[p][:K] for p in parts], axis=0))
+            y_names = y_names + (name,)
+    y = np.column_stack(cols)
     valid = None
     if TOPIC_SENSORS_VALID in log.topics:
         vt = log.topics[TOPIC_SENSORS_VALID]
         valid = np.ones_like(y, dtype=bool)
         kv = min(K, len(vt.t_s))
         for i, f in enumerate(y_names):
-            if f in vt.fields:
-                valid[:kv, i] = vt[f][:kv] > 0.5
+            for src in DERIVED_MEASUREMENTS.get(f, (f,)):
+                if src in vt.fields:
+                    valid[:kv, i] &= vt[src][:kv] > 0.5
     return samples_from_arrays(sim_rate_hz, u_names, u, y_names, y, model, rate_hz, valid=valid,
                                sensor_rates_hz=sensor_rates_hz, t0_s=float(t[0]))

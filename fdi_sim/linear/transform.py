@@ -149,6 +149,47 @@ def drop_states(model: LinearModel, names: Sequence[str], rtol: float = 1e-3) ->
     )
 
 
+def state_as_input(model: LinearModel, state: str, input_name: str | None = None) -> LinearModel:
+    """Make a measured state a known input: drop it, and let its column act as an input column.
+
+    For a continuous model ``dx/dt = A x + B u``, ``y = C x + D u`` with state ``x_i`` measured
+    (the DHC-6 engines' N1 gauges): the rest of the states see ``x_i`` through ``A[:, i]`` and
+    the outputs through ``C[:, i]``, so with ``x_i`` given these become the new input's columns
+    and the dynamics of ``x_i`` itself (the nonlinear, asymmetric N1 lag, linearized at one
+    point) leave the model. Inputs that acted only on ``x_i`` keep their (now near-zero) columns.
+
+    Parameters
+    ----------
+    model : LinearModel
+        Continuous.
+    state : str
+        The state to turn into an input (``"n1_pct"``).
+    input_name : str, optional
+        The input's name (default the state's); its trim ``u0`` is the state's ``x0``; kind
+        ``"control"`` (a known input).
+
+    Raises
+    ------
+    DesignError
+        A discrete model or an unknown state.
+    """
+    if model.is_discrete:
+        raise DesignError("state_as_input works on the continuous model (before discretizing)")
+    if state not in model.state_names:
+        raise DesignError(f"no state {state!r}; states are {', '.join(model.state_names)}")
+    i = model.state_names.index(state)
+    keep = [k for k in range(model.n_states) if k != i]
+    B = np.hstack([model.B[keep], model.A[keep][:, [i]]])
+    D = np.hstack([model.D, model.C[:, [i]]])
+    kinds = tuple(model.input_kinds) + ("control",) if model.input_kinds else ()
+    return replace(
+        model, A=model.A[np.ix_(keep, keep)], B=B, C=model.C[:, keep], D=D,
+        state_names=tuple(model.state_names[k] for k in keep), input_names=tuple(model.input_names) + (input_name or state,),
+        input_kinds=kinds, x0=model.x0[keep], u0=np.concatenate([model.u0, [model.x0[i]]]),
+        meta={**model.meta, "measured_inputs": [*model.meta.get("measured_inputs", []), input_name or state]}, step=None,
+    )
+
+
 def reduce(model: LinearModel, order: int | None = None, *, rel_tol: float = 1e-5,
            input_scale: Sequence[float] | None = None, output_scale: Sequence[float] | None = None,
            keep_slower_than_s: float = 100.0) -> LinearModel:
