@@ -133,13 +133,13 @@ class AngleMagnitudeRule:
 
     def step(self, t_s: float, e: NDArray[np.float64]) -> Decision:
         """One residual vector ``e`` (p,) at time ``t_s`` [s]."""
-        e = np.asarray(e, float)
-        T = float(e @ e)  # e'e
+        e = np.asarray(e, float).reshape(1, -1)  # one row: the same arithmetic as run()
+        T = float(np.einsum("ij,ij->i", e, e)[0])  # e'e
         if not math.isfinite(T):
             return Decision(t_s, T, self.threshold, False, None, False)
         if T <= self.threshold:
             return Decision(t_s, T, self.threshold, False)
-        ang = self.angles_rad(e)
+        ang = self.angles_rad(e)[0]
         i = int(np.argmin(ang))
         iso = self.hypotheses[i] if ang[i] <= self.angle_bound_rad else None
         return Decision(t_s, T, self.threshold, True, iso)

@@ -96,5 +96,6 @@ class SignatureIsolation:
         ok = np.isfinite(s).all(axis=1)
         fired = (s > self.thresholds) & ok[:, None]
         iso = self._match(fired)
-        return DecisionTrace(fired.sum(axis=1).astype(float), fired.any(axis=1), self.threshold, iso,
+        count = np.where(ok, fired.sum(axis=1), np.nan)  # nan where a residual was not finite, as step()
+        return DecisionTrace(count, fired.any(axis=1), self.threshold, iso,
                              None if ok.all() else ok)

@@ -21,6 +21,10 @@ H0 (``exp(-Lambda)`` under H1),
 with expected sample numbers (Wald's identity, ``E0 s = -delta^2/2``, ``E1 s = +delta^2/2``)
 
     E0 N ~ ((1 - alpha') b' + alpha' a') / (-delta^2 / 2),   E1 N ~ ((1 - beta') a' + beta' b') / (delta^2 / 2).
+
+Measured (tests/decision/test_decision_sprt.py, docs/decision.md, delta = 1): the corrected
+``alpha'``/``beta'`` fall inside the binomial 95 % intervals; the corrected sample numbers are
+short by about 4 % at alpha = beta = 0.05 and 2 % at 0.01 (Wald's, uncorrected, by 10-20 %).
 """
 from __future__ import annotations
 
