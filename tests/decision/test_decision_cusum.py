@@ -47,6 +47,12 @@ def test_negative_shift_and_bad_parameters() -> None:
         Cusum(1.0, 0.0, threshold=3.0)
 
 
+def test_exact_design_hits_the_target() -> None:
+    rule = Cusum(1.0, 2.0, arl0_samples=300.0, exact_arl=True)
+    assert cusum_arl_exact(rule.threshold, 2.0) == pytest.approx(300.0, rel=1e-8)
+    assert rule.arl0_samples == pytest.approx(300.0, rel=1e-8)
+
+
 def test_siegmund_formula_limits() -> None:
     assert siegmund_arl(4.0, 0.0, 1.0) == pytest.approx((4.0 + 1.166) ** 2)
     assert siegmund_arl(4.0, -1e-9, 1.0) == pytest.approx((4.0 + 1.166) ** 2, rel=1e-6)
