@@ -45,7 +45,7 @@ from fdi_sim.detectors.base import Residual, finite_or_invalid
 from fdi_sim.detectors.disturbance import (
     _as_augmented, augment_with_gusts, augment_with_sensor_biases, dryden_parameters, rotational_turbulence_inputs,
 )
-from fdi_sim.detectors.samples import Samples, paired_model
+from fdi_sim.detectors.samples import WRAPPED_OUTPUTS, Samples, paired_model
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.linear.transform import discretize
@@ -417,26 +417,38 @@ class GustKalmanDetector:
         return self.calibration.threshold_analytic if self.use_analytic else self.calibration.threshold
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
-        m = self.design.model
+        d, m = self.design, self.design.model
+        cols = list(d.control_columns)
+        # everything the per-sample step needs, built once
+        self._A, self._C = np.asarray(m.A), np.asarray(m.C)
+        self._B, self._D = np.asarray(m.B)[:, cols].copy(), np.asarray(m.D)[:, cols].copy()
+        self._u0 = np.asarray(m.u0, dtype=float)[cols].copy()
+        self._y0 = np.asarray(m.y0, dtype=float)
+        self._wrap = np.array([nm in WRAPPED_OUTPUTS for nm in m.output_names])
+        self._cols = np.asarray(cols)
+        self._k0 = settle_samples(d)
+        self._J = len(d.gains) - 1
         self._x = np.zeros(m.n_states)
-        self._buf = np.zeros((self.design.window_n, m.n_outputs))
+        self._buf = np.zeros((d.window_n, m.n_outputs))
         self._j = 0
         self._alarm_j = 0
         self._L = (np.linalg.cholesky(np.linalg.inv(self.calibration.sigma_m))
                    if self.calibration is not None else None)
 
     def step(self, t_s: float, u: NDArray[np.float64], y: NDArray[np.float64]) -> Residual:
+        """One sample: absolute ``u`` (the model's inputs) and ``y`` (its outputs, raw: the
+        heading is wrapped here); a non-finite measurement is a missing one (zero innovation for
+        that output, as :func:`innovations` does for ``Samples.valid``)."""
         d, m = self.design, self.design.model
-        du = np.asarray(u, dtype=float)[list(d.control_columns)] - np.asarray(m.u0)[list(d.control_columns)]
-        dy = np.asarray(y, dtype=float) - np.asarray(m.y0)
-        cols = list(d.control_columns)
-        nu = dy - m.C @ self._x - m.D[:, cols] @ du
-        nu = np.where(np.isfinite(nu), nu, 0.0) if np.all(np.isfinite(dy)) else nu
-        self._x = m.A @ (self._x + d.gains[min(self._j, len(d.gains) - 1)] @ nu) + m.B[:, cols] @ du
+        du = np.asarray(u, dtype=float)[self._cols] - self._u0
+        dy = np.asarray(y, dtype=float) - self._y0
+        dy[self._wrap] = (dy[self._wrap] + math.pi) % (2.0 * math.pi) - math.pi
+        ok = np.isfinite(dy)
+        nu = np.where(ok, dy - self._C @ self._x - self._D @ du, 0.0)
+        self._x = self._A @ (self._x + d.gains[min(self._j, self._J)] @ nu) + self._B @ du
         self._buf[self._j % d.window_n] = nu
         self._j += 1
-        k0 = settle_samples(d)
-        if self._L is None or self._j <= k0:
+        if self._L is None or self._j <= self._k0:
             return finite_or_invalid(Residual(t_s, nu, 0.0, m.n_outputs, self.threshold, False, valid=False))
         mean = self._buf.mean(axis=0)
         z = mean @ self._L

@@ -8,6 +8,7 @@ layout), so the result reads with ``read_log``, the ``mcap`` tools and Foxglove 
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -59,6 +60,11 @@ def write_extended(log: FlightLog, out: str | Path, vectors: Sequence[NewVectorT
     Returns
     -------
     Path
+
+    Notes
+    -----
+    Vector (CDR) and event (JSON) topics are copied; a topic in another tool's encoding
+    (``RawTopic``) is not.
     """
     out = Path(out)
     if out.exists() and Path(log.path).exists() and out.resolve() == Path(log.path).resolve():
@@ -70,37 +76,56 @@ def write_extended(log: FlightLog, out: str | Path, vectors: Sequence[NewVectorT
     meta = {**log.metadata, **dict(metadata or {})}
     rows: list[tuple[Any, NDArray[np.float64], NDArray[np.float64]]] = []
     evs: list[tuple[Any, list[tuple[float, Mapping[str, Any]]]]] = []
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with FlightLogWriter(out, metadata=meta) as w:
-        for name, t in log.topics.items():
-            if isinstance(t, VectorTopic):
-                ch = w.add_vector_channel(name, t.schema_name, t.fields)
-                rows.append((ch, np.asarray(t.t_s, dtype=float), np.asarray(t.data[:, 1:], dtype=float)))
-            elif isinstance(t, EventTopic):
-                ch = w.add_event_channel(name, t.schema_name, t.json_schema)
-                evs.append((ch, [(e.t_s, e.payload) for e in t.events]))
-            # RawTopic (another tool's encoding) is not copied: say so in the docstring's contract
-        for v in vectors:
-            ch = w.add_vector_channel(v.topic, v.schema_name, ("t_s",) + tuple(v.fields))
-            rows.append((ch, np.asarray(v.t_s, dtype=float), np.asarray(v.values, dtype=float).reshape(len(v.t_s), -1)))
-        for e in events:
-            ch = w.add_event_channel(e.topic, e.schema_name, e.json_schema)
-            evs.append((ch, list(e.events)))
-        t_end = max([r[1][-1] for r in rows if len(r[1])] + [t for _, es in evs for t, _ in es] + [0.0])
-        cursors = [0] * len(rows)
-        ecursors = [0] * len(evs)
-        for k in range(int(math.floor(t_end)) + 2):  # one flush window at a time, in time order
-            hi = float(k + 1)
-            for i, (ch, t, vals) in enumerate(rows):
-                j0 = cursors[i]
-                j1 = int(np.searchsorted(t, hi, side="left"))
-                for j in range(j0, j1):
-                    ch.write(float(t[j]), vals[j])
-                cursors[i] = j1
-            for i, (ch, es) in enumerate(evs):
-                j = ecursors[i]
-                while j < len(es) and es[j][0] < hi:
-                    ch.write(es[j][0], es[j][1])
-                    j += 1
-                ecursors[i] = j
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise LogError(str(out.parent), f"cannot create the output folder ({exc.strerror})") from None
+    # written under a temporary name and moved to `out` only once complete: an interrupted or
+    # failed write leaves neither a partial file that reads as complete nor a changed `out`
+    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}")
+    w = FlightLogWriter(tmp, metadata=meta)
+    try:
+        _copy(log, w, rows, evs, vectors, events)
+        w.close()
+        os.replace(tmp, out)
+    except BaseException:
+        w.abort()
+        tmp.unlink(missing_ok=True)
+        raise
     return out
+
+
+def _copy(log: FlightLog, w: FlightLogWriter, rows: list, evs: list, vectors: Sequence[NewVectorTopic],
+          events: Sequence[NewEventTopic]) -> None:
+    """Write the input topics and the new ones, one flush window at a time, in time order."""
+    for name, t in log.topics.items():
+        if isinstance(t, VectorTopic):
+            ch = w.add_vector_channel(name, t.schema_name, t.fields)
+            rows.append((ch, np.asarray(t.t_s, dtype=float), np.asarray(t.data[:, 1:], dtype=float)))
+        elif isinstance(t, EventTopic):
+            ch = w.add_event_channel(name, t.schema_name, t.json_schema)
+            evs.append((ch, [(e.t_s, e.payload) for e in t.events]))
+        # a RawTopic (another tool's message encoding) is not copied (write_extended's docstring)
+    for v in vectors:
+        ch = w.add_vector_channel(v.topic, v.schema_name, ("t_s",) + tuple(v.fields))
+        rows.append((ch, np.asarray(v.t_s, dtype=float), np.asarray(v.values, dtype=float).reshape(len(v.t_s), -1)))
+    for e in events:
+        ch = w.add_event_channel(e.topic, e.schema_name, e.json_schema)
+        evs.append((ch, list(e.events)))
+    t_end = max([r[1][-1] for r in rows if len(r[1])] + [t for _, es in evs for t, _ in es] + [0.0])
+    cursors = [0] * len(rows)
+    ecursors = [0] * len(evs)
+    for k in range(int(math.floor(t_end)) + 2):  # one flush window at a time, in time order
+        hi = float(k + 1)
+        for i, (ch, t, vals) in enumerate(rows):
+            j0 = cursors[i]
+            j1 = int(np.searchsorted(t, hi, side="left"))
+            for j in range(j0, j1):
+                ch.write(float(t[j]), vals[j])
+            cursors[i] = j1
+        for i, (ch, es) in enumerate(evs):
+            j = ecursors[i]
+            while j < len(es) and es[j][0] < hi:
+                ch.write(es[j][0], es[j][1])
+                j += 1
+            ecursors[i] = j

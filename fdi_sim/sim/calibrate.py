@@ -18,7 +18,10 @@ import time
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+import numpy as np
+
 from fdi_sim import __version__
+from fdi_sim.errors import DesignError
 from fdi_sim.detectors.gust_kalman import Calibration, GustKalmanDetector, calibrate
 from fdi_sim.detectors.samples import log_samples
 from fdi_sim.flightlog import read_log
@@ -55,8 +58,12 @@ def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress
     with tempfile.TemporaryDirectory(prefix="fdi-sim-train-") as tmp:
         for i, seed in enumerate(seeds):
             res = run(fault_free(sc, seed, duration_s), tmp, progress=False)
+            if res.status == "interrupted":  # Ctrl-C / SIGTERM during calibration: stop like any run
+                raise KeyboardInterrupt(f"calibration interrupted during training flight seed {seed}")
             if res.status != "completed":
-                raise RuntimeError(f"training flight seed {seed} ended {res.status}: {res.summary.reason}")
+                raise DesignError(f"{sc.source}: fault-free training flight seed {seed} ended {res.status} "
+                                  f"({res.summary.reason}); a detector cannot be calibrated on a scenario that does not "
+                                  "fly without its faults")
             logs.append(read_log(res.log_path))
             Path(res.log_path).unlink()
             if progress and sys.stderr.isatty():
@@ -74,17 +81,26 @@ def cache_dir() -> Path:
     return Path(base) / "fdi-sim" / "calibrations"
 
 
-def calibration_key(sc: Scenario, detector_id: str, params: Mapping[str, Any], rate_hz: float, n: int,
+def calibration_key(sc: Scenario, design: Any, params: Mapping[str, Any], rate_hz: float, n: int,
                     duration_s: float, target: float) -> str:
-    """What the calibration depends on, hashed."""
+    """What a calibration depends on, hashed: the fault-free scenario, the design itself (its
+    model matrices, gains and window, so a changed linearizer or default invalidates it), the
+    options, the rate, the number and length of the training flights, the target, the sensor
+    suite file the design and the flights use, and the package version."""
     from fdi_sim.sensors.suite import suite_path
 
     ff = json.loads(fault_free(sc, 0, duration_s).to_json())
     ff.pop("name", None)
     ff.pop("description", None)
     suite = Path(suite_path(sc.aircraft, sc.model.sensors.suite)).read_text()
-    blob = json.dumps({"scenario": ff, "detector": detector_id, "params": dict(params), "rate_hz": rate_hz, "n": n,
-                       "duration_s": duration_s, "target": target, "suite": suite, "version": __version__},
+    default_suite = Path(suite_path(sc.aircraft, "default")).read_text()
+    h = hashlib.sha256()
+    m = design.model
+    for a in (m.A, m.B, m.C, m.D, m.u0, m.y0, design.gains[-1], design.signatures):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    blob = json.dumps({"scenario": ff, "params": dict(params), "rate_hz": rate_hz, "n": n, "window_n": design.window_n,
+                       "n_gains": len(design.gains), "duration_s": duration_s, "target": target, "suite": suite,
+                       "default_suite": default_suite, "version": __version__, "design": h.hexdigest()},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
@@ -106,8 +122,8 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
     params : mapping, optional
         Other options of :func:`fdi_sim.detectors.catalogue_observers.make_gust_kalman`.
     training_logs : sequence of FlightLog, optional
-        The training flights already flown (seeds :func:`training_seeds`, ``duration_s``), for a
-        caller that needs them for other detectors too.
+        The training flights already flown (seeds :func:`training_seeds`, ``duration_s`` each),
+        for a caller that needs them for other detectors too; their length is checked.
     """
     from fdi_sim.detectors.catalogue_observers import make_gust_kalman
 
@@ -115,7 +131,7 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
     params.setdefault("turbulence", sc.model.atmosphere.turbulence if sc.model.atmosphere.turbulence != "none"
                       else "light")  # a calm-air design still carries small gust states
     det = make_gust_kalman(model, rate_hz=rate_hz, sim_rate_hz=sc.model.rate_hz, **params)
-    key = calibration_key(sc, "kalman-gust-v1", params, rate_hz, n_flights, duration_s, target)
+    key = calibration_key(sc, det.design, params, rate_hz, n_flights, duration_s, target)
     path = cache_dir() / f"{key}.json"
     cal = None
     if use_cache and path.is_file():
@@ -125,7 +141,14 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
             cal = None  # a damaged cache entry is recomputed
     if cal is None or cal.sigma_m.shape != (det.design.model.n_outputs,) * 2:
         seeds = training_seeds(n_flights)
-        logs = list(training_logs) if training_logs is not None else fly_training(sc, seeds, duration_s, progress=progress)
+        if training_logs is not None:
+            logs = list(training_logs)
+            flown = [float(lg.topics["/truth/state"].t_s[-1]) for lg in logs]
+            if len(logs) != n_flights or any(abs(f - duration_s) > 0.5 for f in flown):
+                raise DesignError(f"training_logs: {len(logs)} flights of {min(flown):g}-{max(flown):g} s given for "
+                                  f"n_flights={n_flights} x duration_s={duration_s:g}")
+        else:
+            logs = fly_training(sc, seeds, duration_s, progress=progress)
         flights = [log_samples(lg, det.design.model, rate_hz) for lg in logs]
         labels = [f"seed {s}, {duration_s:g} s, {sc.model.atmosphere.turbulence} turbulence, faults removed" for s in seeds]
         cal = calibrate(det.design, flights, target, labels)

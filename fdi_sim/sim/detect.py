@@ -207,8 +207,6 @@ class LogModel:
 
 def model_for_log(log: FlightLog, rate_hz: float) -> LogModel:
     """Trim and linearize the log's initial point; the model at ``rate_hz`` in the samples' form."""
-    from fdi_sim.linear.grid import parse_grid_spec
-    from fdi_sim.linear.linearize import linearize_grid
     from fdi_sim.scenario.loader import from_dict
 
     meta = log.metadata.get(METADATA_SCENARIO)
@@ -216,6 +214,14 @@ def model_for_log(log: FlightLog, rate_hz: float) -> LogModel:
         raise LogError(str(log.path), "no 'scenario' metadata record: not a log written by `fdi-sim run`, so its "
                        "aircraft and operating point are unknown")
     sc = from_dict(json.loads(meta["json"]), source=f"{log.path} (scenario metadata)")
+    return model_for_scenario(sc, rate_hz)
+
+
+def model_for_scenario(sc: Any, rate_hz: float) -> LogModel:
+    """Trim and linearize a scenario's initial point (one point, no validation, a few seconds)."""
+    from fdi_sim.linear.grid import parse_grid_spec
+    from fdi_sim.linear.linearize import linearize_grid
+
     ini = sc.model.initial
     speed = f"vt_kts={ini.vt_kts}" if getattr(ini, "vt_kts", None) else f"vc_kts={ini.vc_kts}"
     spec = f"h_ft={ini.h_ft};{speed}"
@@ -223,8 +229,7 @@ def model_for_log(log: FlightLog, rate_hz: float) -> LogModel:
         spec += f";flaps_deg={ini.flaps_deg}"
     sched = linearize_grid(parse_grid_spec(spec, sc.aircraft), validate=False)
     found = sched.model_at(sc.operating_point(), dt_s=1.0 / rate_hz)
-    sim_rate_hz = float(meta.get("rate_hz", sc.model.rate_hz))
-    return LogModel(sc, sched, paired_model(found.model, sim_rate_hz), sc.aircraft)
+    return LogModel(sc, sched, paired_model(found.model, float(sc.model.rate_hz)), sc.aircraft)
 
 
 def build_detector(spec: DetectorSpec, model: Any) -> Any:
@@ -258,7 +263,7 @@ def run_detector(det: Any, ident: str, samples: Samples, model: Any) -> Detector
     cols = [m_in.index(nm) for nm in samples.input_names]
     u_abs = np.tile(np.asarray(model.u0, dtype=float), (n, 1))
     u_abs[:, cols] += samples.du
-    y_abs = samples.dy + samples.y0
+    y_abs = np.where(samples.valid, samples.dy + samples.y0, np.nan)  # a dropout is not a measurement
     stat = np.full(n, np.nan)
     thr = np.full(n, np.nan)
     alarm = np.zeros(n, dtype=bool)

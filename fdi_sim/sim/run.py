@@ -286,9 +286,10 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     ch_truth = None
     wall0 = time.perf_counter()
     with stop.installed():
-        writer = FlightLogWriter(starting, metadata=metadata, flush_period_s=1.0)
         flying = False
+        writer = None
         try:
+            writer = FlightLogWriter(starting, metadata=metadata, flush_period_s=1.0)
             fault_defs = [registry.get("fault", tid).factory(p) for tid, p in sc.faults]
             ac = Aircraft(sc.aircraft, sc.dt_s, icing=any(d.family == "airframe" for d in fault_defs))
             ac.set_atmosphere(Atmosphere(), jsbsim_seed)
@@ -342,11 +343,11 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             if flying:  # raised by hand inside the loop's callees: still a finished log
                 status, reason = "interrupted", stop.reason or "stopped by the user (Ctrl-C)"
             else:
-                _discard(writer, starting)
+                _discard(writer, starting, stop)
                 raise RunInterrupted(stop.reason or "stopped by the user (Ctrl-C)", str(out)) from None
         except BaseException:
             if not flying:
-                _discard(writer, starting)
+                _discard(writer, starting, stop)
             raise
         finally:
             if flying:
@@ -368,9 +369,14 @@ def _last_time(ch) -> float:
     return 0.0 if t is None else t
 
 
-def _discard(writer: FlightLogWriter, starting: Path) -> None:
-    """Drop the log of a run that never flew (the temporary file; nothing at the final path)."""
-    writer.abort()
+def _discard(writer: FlightLogWriter | None, starting: Path, stop: StopRequest) -> None:
+    """Drop the log of a run that never flew (the temporary file; nothing at the final path).
+
+    A second Ctrl-C while discarding only sets the flag (it must not leave the temporary file).
+    """
+    stop.start_flight()
+    if writer is not None:
+        writer.abort()
     starting.unlink(missing_ok=True)
 
 

@@ -39,7 +39,8 @@ from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import Scenario, load
 from fdi_sim.sim.calibrate import DEFAULT_TARGET, fault_free, fly_training, training_seeds
 from fdi_sim.sim.detect import (
-    ISOLATION_WINDOW_S, DetectorSpec, DetectorTrace, LogModel, _matches, build_detector, fault_windows, run_detector,
+    ISOLATION_WINDOW_S, DetectorSpec, DetectorTrace, LogModel, _matches, build_detector, fault_windows,
+    model_for_scenario, run_detector,
 )
 
 RATE_HZ = 20.0
@@ -113,31 +114,27 @@ def detector_ids() -> list[str]:
 
 
 def _log_model(sc: Scenario) -> LogModel:
-    from fdi_sim.detectors.samples import paired_model
-    from fdi_sim.linear.grid import parse_grid_spec
-    from fdi_sim.linear.linearize import linearize_grid
-
-    ini = sc.model.initial
-    spec = f"h_ft={ini.h_ft};" + (f"vt_kts={ini.vt_kts}" if ini.vt_kts else f"vc_kts={ini.vc_kts}")
-    if ini.flaps_deg:
-        spec += f";flaps_deg={ini.flaps_deg}"
-    sched = linearize_grid(parse_grid_spec(spec, sc.aircraft), validate=False)
-    found = sched.model_at(sc.operating_point(), dt_s=1.0 / RATE_HZ)
-    return LogModel(sc, sched, paired_model(found.model, sc.model.rate_hz), sc.aircraft)
+    return model_for_scenario(sc, RATE_HZ)
 
 
 class _Runner:
     """Designs one detector for a scenario and runs it over logs: statistic traces."""
 
-    def __init__(self, ident: str, lm: LogModel, training: Sequence[Any], target: float) -> None:
+    def __init__(self, ident: str, lm: LogModel, training: Sequence[Any], target: float, duration_s: float) -> None:
         self.id, self.lm, self.target = ident, lm, target
+        self.analytic = None
         sc = lm.scenario
         self._measure = None
         if ident == "kalman-gust-v1":
             from fdi_sim.sim.calibrate import calibrated_gust_kalman
 
             self.det = calibrated_gust_kalman(sc, lm.continuous(), rate_hz=RATE_HZ, n_flights=len(training),
-                                              target=target, training_logs=training, progress=False)
+                                              duration_s=duration_s, target=target, training_logs=training,
+                                              progress=False)
+            from fdi_sim.detectors.gust_kalman import GustKalmanDetector, analytic_calibration
+
+            # its "own" threshold for the card is the design's prediction (Sigma_m = S / W, chi-square)
+            self.analytic = GustKalmanDetector(self.det.design, analytic_calibration(self.det.design, target))
             self._model = self.det.design.model
         elif ident.startswith("kinematic-"):
             from fdi_sim.detectors.kinematic import MeasurementSet
@@ -206,7 +203,7 @@ def condition_card(aircraft: str, turbulence: str, ids: Sequence[str], *, n_trai
                                    False, NOT_APPLICABLE[ident]))
             continue
         try:
-            runner = _Runner(ident, lm, training, target)
+            runner = _Runner(ident, lm, training, target, duration_s)
             tr_train = [runner.trace(lg) for lg in training]
             tr_held = [runner.trace(lg) for lg in held]
         except (FdiSimError, ValueError, TypeError, np.linalg.LinAlgError) as exc:
@@ -217,7 +214,12 @@ def condition_card(aircraft: str, turbulence: str, ids: Sequence[str], *, n_trai
         thr = calibrated_threshold(tr_train, target)
         n = int(sum(int(t.valid.sum()) for t in tr_held))
         own = float(np.nanmedian(np.concatenate([t.threshold for t in tr_held]))) if tr_held else math.nan
-        k_own = int(sum(int(_alarm(t, own).sum()) for t in tr_held)) if math.isfinite(own) else n
+        if runner.analytic is not None:  # kalman-gust-v1: its design's own prediction
+            own = runner.analytic.threshold
+            k_own = int(sum(int(runner.analytic.run(log_samples(lg, runner.det.design.model, RATE_HZ)).alarm.sum())
+                            for lg in held))
+        else:  # the detector's own decisions (its design threshold, or the shipped calibration)
+            k_own = int(sum(int(t.alarm.sum()) for t in tr_held))
         alarms = [_alarm(t, thr) for t in tr_held]
         k = int(sum(int(a.sum()) for a in alarms))
         onsets = sum(int(np.count_nonzero(a[1:] & ~a[:-1]) + int(a[0])) for a in alarms if len(a))
@@ -251,7 +253,10 @@ def fault_card(scenario_path: str | Path, ids: Sequence[str], *, n_train: int, d
 
     sc = load(scenario_path)
     with tempfile.TemporaryDirectory() as tmp:
-        log = read_log(run(sc, tmp, progress=False).log_path)
+        res = run(sc, tmp, progress=False)
+        if res.status == "interrupted":
+            raise KeyboardInterrupt(f"{sc.name} interrupted")
+        log = read_log(res.log_path)  # a diverged run (the fault's physics) is still a whole log
     training = fly_training(sc, training_seeds(n_train), duration_s, progress=False)
     lm = _log_model(sc)
     faults = fault_windows(log)
@@ -260,7 +265,7 @@ def fault_card(scenario_path: str | Path, ids: Sequence[str], *, n_train: int, d
         if ident in NOT_APPLICABLE:
             continue
         try:
-            runner = _Runner(ident, lm, training, target)
+            runner = _Runner(ident, lm, training, target, duration_s)
             thr = calibrated_threshold([runner.trace(lg) for lg in training], target)
             tr = runner.trace(log)
         except (FdiSimError, ValueError, TypeError, np.linalg.LinAlgError) as exc:

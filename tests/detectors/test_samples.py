@@ -115,7 +115,10 @@ def test_bad_rates_and_missing_signals_are_named(calm_flight) -> None:
         log_samples(log, odd, 20)
     at_sim_rate = sched.model_at(op, dt_s=1.0 / 120).model
     assert np.array_equal(paired_model(at_sim_rate, 120.0).C, at_sim_rate.C)  # n = 1: as it is
-    assert not np.array_equal(paired_model(model, 120.0).C, model.C)  # n = 6: C A
+    paired = paired_model(model, 120.0)  # n = 6: (A, B, C A, C B + D)
+    assert np.allclose(paired.C, model.C @ model.A, rtol=0, atol=1e-12)
+    assert np.allclose(paired.D, model.C @ model.B + model.D, rtol=0, atol=1e-12)
+    assert paired_model(paired, 120.0) is paired  # pairing twice changes nothing
     with pytest.raises(SampleError, match="continuous"):
         paired_model(sched.model_at(op, dt_s=1.0 / 20).model.__class__(
             **{**{f: getattr(model, f) for f in ("A", "B", "C", "D", "state_names", "input_names", "output_names",
