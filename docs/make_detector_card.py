@@ -36,10 +36,9 @@ def _fault(args: tuple[str, int, float, float]) -> dict:
     name, n, dur, target = args
     rows, traces, thr = card.fault_card(DOCS.parent / "scenarios" / f"{name}.toml", card.detector_ids(), n_train=n,
                                         duration_s=dur, target=target, say=lambda s: print(s, flush=True))
-    keep = {k: {"t_s": v.t_s.tolist(), "statistic": [None if x != x else float(x) for x in v.statistic],
-                "threshold": thr[k]} for k, v in traces.items() if k in ("kalman-gust-v1", "kinematic-attitude-v1",
-                                                                          "kinematic-airspeed-v1",
-                                                                          "kinematic-flow-angles-v1", "kalman-nis-v1")}
+    keep = {k: {"t_s": [round(t, 3) for t in v.t_s.tolist()],
+                "statistic": [None if x != x else float(f"{x:.4g}") for x in v.statistic], "threshold": thr[k]}
+            for k, v in traces.items() if k == "kalman-gust-v1"}  # the figure's detector
     return {"scenario": name, "rows": card.to_json(rows), "traces": keep}
 
 
