@@ -103,9 +103,11 @@ class StopRequest:
 
     def _handle(self, signum: int, _frame: object) -> None:
         self.reason = self.reason or _SIGNAL_REASONS.get(signum, f"stopped by signal {signum}")
+        # the flag first: a KeyboardInterrupt raised while C++ calls back into Python (JSBSim's
+        # logger during the trim) can be swallowed there; run() checks the flag before take-off
+        self.requested = True
         if not self._flying:
             raise KeyboardInterrupt
-        self.requested = True
 
     @contextmanager
     def installed(self) -> Iterator[StopRequest]:
@@ -332,6 +334,8 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
                     writer.add_vector_channel(TOPIC_SENSORS_VALID, "fdi_sim/msg/SensorValid", ("t_s",) + sensors.names)
                     if injector.has_dropout else None,
                 )
+            if stop.requested:  # a signal whose KeyboardInterrupt was swallowed during the set-up
+                raise KeyboardInterrupt
             # from here on a stop request only sets a flag that the loop reads once per step
             stop.start_flight()
             writer.move_to(out)
