@@ -217,6 +217,8 @@ def _from_dict(data: Mapping[str, Any], source: str, text: str | None) -> Scenar
                 raise ScenarioError(source, f"{key}.type", f"unknown {kind} id {type_id!r}", fix) from None
             if spec.params is None or not (isinstance(spec.params, type) and issubclass(spec.params, BaseModel)):
                 params: Any = dict(entry)
+                if kind == "detector":
+                    _check_factory_keys(entry, spec, source, key)
             else:
                 try:  # strict as the sections are (schema.py); TOML arrays read as tuples
                     params = spec.params.model_validate(_tuples(dict(entry)), strict=True)
@@ -230,6 +232,30 @@ def _from_dict(data: Mapping[str, Any], source: str, text: str | None) -> Scenar
     sc = Scenario(model=model, source=source, text=text, **plugins)
     _cross_checks(sc)
     return sc
+
+
+#: keys a [[detectors]] entry may carry besides its factory's options (the calibration of
+#: kalman-gust-v1, fdi_sim.sim.calibrate)
+DETECTOR_ENTRY_KEYS = ("type", "n_flights", "duration_s", "target")
+
+
+def _check_factory_keys(entry: Mapping[str, Any], spec: Any, source: str, key: str) -> None:
+    """A detector without a parameter model: its keys must be options of its factory."""
+    import inspect
+
+    try:
+        params = inspect.signature(spec.factory).parameters
+    except (TypeError, ValueError):
+        return
+    if any(p.kind == p.VAR_KEYWORD for p in params.values()):
+        return
+    known = [n for n in params if n != "model"] + list(DETECTOR_ENTRY_KEYS)
+    for k in entry:
+        if k not in known:
+            close = difflib.get_close_matches(k, known, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ScenarioError(source, f"{key}.{k}", f"unknown key {k!r} for detector {spec.id!r}{hint}",
+                                f"options of {spec.id}: {', '.join(n for n in known if n != 'type')}")
 
 
 def _check_depth(data: Any, source: str) -> None:

@@ -227,3 +227,17 @@ def test_misspelt_keys_get_did_you_mean(old: str, new: str, key: str, meant: str
     typo = key.rsplit(".", 1)[-1]
     assert f"unknown key {typo!r} (did you mean {meant!r}?)" in e.problem, str(e)
     assert meant in e.fix
+
+
+def test_detector_entry_keys_are_checked_against_the_factory() -> None:
+    """[[detectors]] keys are the detector's options: a typo names the entry, the key and the fix."""
+    from fdi_sim.errors import ScenarioError
+    from fdi_sim.scenario import loads
+
+    base = 'name = "d"\naircraft = "f16"\nduration_s = 5.0\n[initial]\nh_ft = 10000.0\nvt_kts = 400.0\n'
+    sc = loads(base + '[[detectors]]\ntype = "kalman-gust-v1"\nturbulence = "light"\ntarget = 1e-4\n')
+    assert sc.detectors[0][0] == "kalman-gust-v1"
+    with pytest.raises(ScenarioError) as err:
+        loads(base + '[[detectors]]\ntype = "kalman-gust-v1"\nturbulnce = "light"\n')
+    msg = str(err.value)
+    assert "detectors[0].turbulnce" in msg and "did you mean 'turbulence'" in msg and "Fix:" in msg
