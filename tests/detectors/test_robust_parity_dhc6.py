@@ -241,4 +241,7 @@ def test_docs_study_numbers(tmp_path):
                      np.random.default_rng(2025))
     nom, rob, trim = (calm.results[n].false_alarms[key] for n in ("nominal", "robust", "robust+trim"))
     assert nom.rate > 0.99 and rob.rate > 0.99
-    assert trim.ci[1] < 0.2
+    # docs: robust+trim removes most calm-air alarms at p = 17, 0.176 [0.148, 0.207] (docs script; 0.206 upper
+    # end with this test's bootstrap), re-measured after the engine gauges changed the DHC-6 noise draws
+    # (0.104 [0.086, 0.125] before): below a quarter of the windows, and measurably below nominal
+    assert trim.ci[1] < 0.25 < nom.ci[0]
