@@ -45,7 +45,7 @@ from fdi_sim.detectors.base import Residual, finite_or_invalid
 from fdi_sim.detectors.disturbance import (
     _as_augmented, augment_with_gusts, augment_with_sensor_biases, dryden_parameters, rotational_turbulence_inputs,
 )
-from fdi_sim.detectors.samples import WRAPPED_OUTPUTS, Samples, paired_model
+from fdi_sim.detectors.samples import Samples, is_wrapped, paired_model
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.linear.transform import discretize
@@ -365,7 +365,8 @@ class GustKalmanTrace:
 
 
 def isolate(design: GustKalmanDesign, m: NDArray[np.float64], sigma_m: NDArray[np.float64],
-            min_cosine: float, since_s: float | None = None) -> tuple[str | None, float]:
+            min_cosine: float, since_s: float | None = None, *,
+            sigma_inv: NDArray[np.float64] | None = None) -> tuple[str | None, float]:
     """The hypothesis whose signature is closest in angle to ``m`` (metric ``Sigma_m^-1``), or None.
 
     Parameters
@@ -376,7 +377,7 @@ def isolate(design: GustKalmanDesign, m: NDArray[np.float64], sigma_m: NDArray[n
         Time since the alarm began [s]: onsets more than one window before it are not searched
         (the fault is then older than the window: ``k = W``).
     """
-    Si = np.linalg.inv(sigma_m)
+    Si = np.linalg.inv(sigma_m) if sigma_inv is None else sigma_inv
     g = design.signatures  # (h, W, p)
     W = g.shape[1]
     if since_s is not None and since_s * design.rate_hz >= W:
@@ -424,7 +425,7 @@ class GustKalmanDetector:
         self._B, self._D = np.asarray(m.B)[:, cols].copy(), np.asarray(m.D)[:, cols].copy()
         self._u0 = np.asarray(m.u0, dtype=float)[cols].copy()
         self._y0 = np.asarray(m.y0, dtype=float)
-        self._wrap = np.array([nm in WRAPPED_OUTPUTS for nm in m.output_names])
+        self._wrap = np.array([is_wrapped(nm) for nm in m.output_names])
         self._cols = np.asarray(cols)
         self._k0 = settle_samples(d)
         self._J = len(d.gains) - 1
@@ -432,8 +433,8 @@ class GustKalmanDetector:
         self._buf = np.zeros((d.window_n, m.n_outputs))
         self._j = 0
         self._alarm_j = 0
-        self._L = (np.linalg.cholesky(np.linalg.inv(self.calibration.sigma_m))
-                   if self.calibration is not None else None)
+        self._Si = np.linalg.inv(self.calibration.sigma_m) if self.calibration is not None else None
+        self._L = np.linalg.cholesky(self._Si) if self._Si is not None else None
 
     def step(self, t_s: float, u: NDArray[np.float64], y: NDArray[np.float64]) -> Residual:
         """One sample: absolute ``u`` (the model's inputs) and ``y`` (its outputs, raw: the
@@ -459,7 +460,7 @@ class GustKalmanDetector:
         if not alarm:
             self._alarm_j = 0
         since = (self._j - self._alarm_j) / d.rate_hz if alarm else None
-        iso = isolate(d, mean, self.calibration.sigma_m, self.min_cosine, since_s=since)[0] if alarm else None
+        iso = isolate(d, mean, self.calibration.sigma_m, self.min_cosine, since_s=since, sigma_inv=self._Si)[0] if alarm else None
         return finite_or_invalid(Residual(t_s, mean, T, m.n_outputs, self.threshold, alarm, iso))
 
     def run(self, samples: Samples) -> GustKalmanTrace:
@@ -481,5 +482,5 @@ class GustKalmanDetector:
             if j == 0 or not alarm[j - 1]:
                 start = j
             iso[j], cos[j] = isolate(d, mw[j], self.calibration.sigma_m, self.min_cosine,
-                                     since_s=(j - start) / d.rate_hz)
+                                     since_s=(j - start) / d.rate_hz, sigma_inv=self._Si)
         return GustKalmanTrace(samples.t_s, T, alarm, valid, tuple(iso), cos)

@@ -74,8 +74,9 @@ from fdi_sim.errors import DesignError
 TOPIC_COMMANDS = "/commands/pilot"
 TOPIC_SENSORS = "/sensors/measurements"
 TOPIC_SENSORS_VALID = "/sensors/valid"
-#: outputs that are angles on a circle (wrapped after trim subtraction)
-WRAPPED_OUTPUTS = ("psi_rad",)
+def is_wrapped(name: str) -> bool:
+    """An output that is an angle on a circle (a heading ``psi*_rad``): wrapped after trim subtraction."""
+    return name.startswith("psi") and name.endswith("_rad")
 #: signals a model may use that the log holds per engine: their mean (the linearizer's engine
 #: state is one N1 for both PT6As; a measured input for a model with ``state_as_input``)
 DERIVED_MEASUREMENTS: dict[str, tuple[str, ...]] = {"n1_pct": ("n1_0_pct", "n1_1_pct"), "prop_rpm": ("prop_0_rpm", "prop_1_rpm")}
@@ -299,7 +300,7 @@ def samples_from_arrays(sim_rate_hz: float, u_names: Sequence[str], u: NDArray[n
     du = u_mean - u0
     dy = y[rows][:, yi] - y0
     for j, nm in enumerate(out_names):
-        if nm in WRAPPED_OUTPUTS:
+        if is_wrapped(nm):
             dy[:, j] = (dy[:, j] + math.pi) % (2.0 * math.pi) - math.pi
     ok = np.isfinite(dy)
     if valid is not None:

@@ -11,13 +11,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
-
-def _cp(k: int, n: int) -> tuple[float, float]:
-    lo = 0.0 if k == 0 else float(stats.beta.ppf(0.025, k, n - k + 1))
-    hi = 1.0 if k == n else float(stats.beta.ppf(0.975, k + 1, n - k))
-    return lo, hi
+from fdi_sim.decision.intervals import clopper_pearson
 
 
 def _fmt(x: float) -> str:
@@ -37,7 +32,7 @@ def conditions_table(data: dict[str, Any]) -> list[str]:
                              f"{r['error'][:110].replace('|', '/')} | - | - | - | unusable |")
                 continue
             n, k = r["samples"], r["calibrated_alarms"]
-            lo, hi = _cp(k, n)
+            lo, hi = clopper_pearson(k, n)
             own = r["own_threshold_alarms"] / n if n else math.nan
             lines.append(f"| {ident} | {r['aircraft']} | {r['turbulence']} | {n} | {k}, {_fmt(k / n)} "
                          f"[{_fmt(lo)}, {_fmt(hi)}] | {own:.2e} | {r['onsets_per_h']:.1f} | "

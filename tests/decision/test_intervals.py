@@ -1,0 +1,27 @@
+"""Clopper-Pearson and the binomial count interval against exact binomial tail sums."""
+from __future__ import annotations
+
+import pytest
+from scipy import stats
+
+from fdi_sim.decision.intervals import binomial_upper, clopper_pearson
+
+
+@pytest.mark.parametrize("k,n", [(0, 48000), (4, 47680), (65, 47680), (10, 10)])
+def test_clopper_pearson_bounds_have_the_tail_probability(k: int, n: int) -> None:
+    lo, hi = clopper_pearson(k, n)
+    if k > 0:  # P(X >= k | lo) = 2.5 %
+        assert stats.binom.sf(k - 1, n, lo) == pytest.approx(0.025, rel=1e-6)
+    else:
+        assert lo == 0.0
+    if k < n:  # P(X <= k | hi) = 2.5 %
+        assert stats.binom.cdf(k, n, hi) == pytest.approx(0.025, rel=1e-6)
+    else:
+        assert hi == 1.0
+
+
+def test_binomial_upper_is_the_975_quantile() -> None:
+    """48,000 samples at 1e-4 (the card's held-out size and target): 4.8 expected, at most 10."""
+    u = binomial_upper(48000, 1e-4)
+    assert u == 10
+    assert stats.binom.cdf(u, 48000, 1e-4) >= 0.975 > stats.binom.cdf(u - 1, 48000, 1e-4)
