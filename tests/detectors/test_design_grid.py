@@ -35,10 +35,10 @@ from fdi_sim.detectors.beard_jones_filter import BeardJonesFilter
 from fdi_sim.detectors.catalogue_observers import make_kalman
 from fdi_sim.detectors.catalogue_parity import make_parity
 from fdi_sim.detectors.directional_observer import DiscreteObserver
+from fdi_sim.detectors.noise import suite_sensor_std
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.linear.schedule import ModelSchedule
-from fdi_sim.sensors.suite import load_suite
 
 DT_S = 1.0 / 120.0  # the default detector rate (the simulation's)
 N_TRIM_STEPS = 30  # at least this many trim steps; windowed detectors run until valid, at most MAX_TRIM_STEPS
@@ -80,12 +80,6 @@ EXPECTED_REFUSALS: dict[tuple[str, str], str] = {
 }
 
 
-def _sensor_std(aircraft: str, model: LinearModel) -> np.ndarray:
-    """Noise standard deviation per model output [output units] from the aircraft's sensor suite."""
-    std = {s.name: s.noise_std for s in load_suite(aircraft)}
-    return np.array([std[n] for n in model.output_names])
-
-
 def _closed_loop_training(md: LinearModel, sensor_std: np.ndarray, rng: np.random.Generator
                           ) -> tuple[np.ndarray, np.ndarray]:
     """Absolute (u_controls, y) of a run with exact autopilot relations (module docstring)."""
@@ -117,7 +111,7 @@ def _design(detector: str, aircraft: str, sched: ModelSchedule, i: int, rng: np.
     sm = sched.model_at(p.op, dt_s=DT_S)
     assert sm.indices == (i,)  # the model of this grid point, not a neighbour's
     md = sm.model
-    sd = _sensor_std(aircraft, md)
+    sd = suite_sensor_std(md)
     factory = registry.get("detector", detector).factory
     if detector == "parity-v1":
         return factory(md, R=np.diag(sd**2)), md
@@ -233,7 +227,7 @@ def test_diverging_kalman_filter_is_reported_invalid(default_schedules: dict[str
     # is zero runs open loop on an unstable model: a 1e-3 command offset overflows in about 1000 steps
     sched = default_schedules["f16"]
     md = sched.model_at(sched.points[0].op, dt_s=DT_S).model
-    det = make_kalman(md, sensor_std=_sensor_std("f16", md))
+    det = make_kalman(md, sensor_std=suite_sensor_std(md))
     bad = replace(det.design, model=replace(md, A=2.0 * md.A), K=np.zeros_like(det.design.K))
     det = type(det)(bad, alpha=det.alpha)
     det.reset()
@@ -247,7 +241,7 @@ def test_diverging_beard_jones_filter_is_reported_invalid(default_schedules: dic
     # doubled: the runtime of a mis-scaled design, every mode but the lag states at ~2 per step
     sched = default_schedules["DHC6"]
     md = sched.model_at(sched.points[0].op, dt_s=DT_S).model
-    det = registry.get("detector", "beard-jones-v1").factory(md, faults=["elevator_cmd_norm"], sensor_std=_sensor_std("DHC6", md))
+    det = registry.get("detector", "beard-jones-v1").factory(md, faults=["elevator_cmd_norm"], sensor_std=suite_sensor_std(md))
     assert isinstance(det, BeardJonesFilter)
     det.observer = DiscreteObserver.from_gain(2.0 * md.A, md.B, md.C, md.D, np.zeros_like(det.design.gain.L), md.u0, md.y0)
     det.reset()
@@ -261,7 +255,7 @@ def test_hugely_mis_scaled_parity_model_is_refused(default_schedules: dict[str, 
     # the window overflows at design, and the design says so instead of running a NaN threshold
     sched = default_schedules["f16"]
     md = sched.model_at(sched.points[0].op, dt_s=DT_S).model
-    R = np.diag(_sensor_std("f16", md) ** 2)
+    R = np.diag(suite_sensor_std(md) ** 2)
     make_parity(md, order_s=1, R=R)  # the right model designs
     with pytest.raises(DesignError, match="not finite"):
         make_parity(replace(md, B=1e300 * md.B, D=1e300 * md.D), order_s=1, R=R, actuators=["elevator_cmd_norm"])
@@ -295,7 +289,7 @@ def test_pca_drops_the_exact_relations_the_autopilot_makes(default_schedules: di
 
     sched = default_schedules["f16"]
     md = sched.model_at(sched.points[0].op, dt_s=DT_S).model
-    u_tr, y_tr = _closed_loop_training(md, _sensor_std("f16", md), np.random.default_rng(3))
+    u_tr, y_tr = _closed_loop_training(md, suite_sensor_std(md), np.random.default_rng(3))
     cols = md.control_columns()
     Z = series_windows(u_tr, y_tr, 3, md.u0[cols], md.y0)
     sv = np.linalg.svd(Z, compute_uv=False)
@@ -342,5 +336,5 @@ def test_dhc6_outputs_carry_an_exact_kinematic_relation(default_schedules: dict[
     assert s[-1] < 1e-12 * s[0] and md.C.shape[0] == len(s)
     w = dict(zip(md.output_names, u[:, -1] * np.sign(u[md.output_names.index("theta_rad"), -1])))
     assert w["theta_rad"] > 0.7 and w["alpha_rad"] < -0.7
-    det = registry.get("detector", "beard-jones-v1").factory(md, sensor_std=_sensor_std("DHC6", md))
+    det = registry.get("detector", "beard-jones-v1").factory(md, sensor_std=suite_sensor_std(md))
     assert set(det.hypotheses) == {"elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm", "throttle_cmd_norm"}
