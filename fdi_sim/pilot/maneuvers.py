@@ -1,7 +1,8 @@
 """Maneuvers: the excitation and reference changes of a scenario.
 
 Two families, both pure functions of time so that a whole block of steps is evaluated at once
-(vectorized over ``t_s``), which keeps the per-step cost of the pilot to a table lookup:
+(vectorized over ``t_s``); the pilot's compiled step evaluates the same edges and ramps for one
+step at a time (:mod:`fdi_sim.pilot._kernels`):
 
 * stick inputs (``doublet-v1``, ``3211-v1``, ``pulse-v1``) add a deflection to one command axis
   on top of the autopilot, the excitation FDI needs;
@@ -72,14 +73,25 @@ class PulseTrain:
     def t_end_s(self) -> float:
         return self.t_start_s + self.pulse_s * sum(self.widths)
 
-    def stick(self, t_s: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Deflection added to the axis at each time [normalized]."""
-        out = np.zeros_like(t_s)
+    def pulses(self) -> list[tuple[float, float, float]]:
+        """The pulses as (start [s], end [s], deflection [normalized]), each holding on [start, end).
+
+        The one place the pulse edges are computed: :meth:`stick` and the pilot's compiled step
+        both read them, so both see the same floats.
+        """
+        out = []
         t0 = self.t_start_s
         for sign, w in zip(self.pattern, self.widths):
             t1 = t0 + w * self.pulse_s
-            out[(t_s >= t0) & (t_s < t1)] = sign * self.amplitude_norm
+            out.append((t0, t1, sign * self.amplitude_norm))
             t0 = t1
+        return out
+
+    def stick(self, t_s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Deflection added to the axis at each time [normalized] (a later pulse wins an overlap)."""
+        out = np.zeros_like(t_s)
+        for t0, t1, value in self.pulses():
+            out[(t_s >= t0) & (t_s < t1)] = value
         return out
 
 

@@ -73,8 +73,10 @@ def compare(ref: dict, new: dict) -> list[str]:
     """Differences between two fingerprint sets (empty: identical topics)."""
     bad = []
     for name in sorted(set(ref) | set(new)):
-        if name not in ref or name not in new:
-            bad.append(f"{name}: only in {'the reference' if name in ref else 'the new run'}")
+        if name not in new:
+            bad.append(f"{name}: in the reference, not flown now")
+            continue
+        if name not in ref:  # a scenario added since the reference: nothing to compare it with
             continue
         a, b = ref[name], new[name]
         if (a["status"], a["steps"]) != (b["status"], b["steps"]):
@@ -99,9 +101,13 @@ def main(argv: list[str] | None = None) -> int:
         if args.pattern != "*.toml":
             ref = {k: v for k, v in ref.items() if k in new}
         bad = compare(ref, new)
-        same_files = sum(ref[n]["file_sha256"] == new[n]["file_sha256"] for n in new if n in ref)
-        print(f"{len(new)} scenarios: {len(new) - len({b.split(':')[0] for b in bad})} with identical topics, "
-              f"{same_files} with identical files")
+        both = [n for n in new if n in ref]
+        same_files = sum(ref[n]["file_sha256"] == new[n]["file_sha256"] for n in both)
+        print(f"{len(both)} scenarios in the reference: {len(both) - len({b.split(':')[0] for b in bad})} with "
+              f"identical topics, {same_files} with identical files")
+        extra = sorted(set(new) - set(ref))
+        if extra:
+            print(f"not in the reference (not compared): {', '.join(extra)}")
         for b in bad:
             print("DIFFERENT", b)
         return 1 if bad else 0
