@@ -80,13 +80,13 @@ def _fma(typingctx, a, b, c):
     return sig, codegen
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _wrap(a):
     # (a + pi) mod 2 pi - pi, the batch path's rule (float modulo with Python's sign convention)
     return (a + math.pi) % _TWO_PI - math.pi
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _check(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, ncol, nchan):
     n = y.shape[0]
     if (t_s.shape[0] != n or y.shape[1] != ncol or ok.shape[0] != n or ok.shape[1] != ncol
@@ -97,7 +97,7 @@ def _check(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, ncol, nchan):
                          "must agree")
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _row(y, ok, fresh, j, vals, iprm, ist, k):
     """Read row ``j`` into ``vals`` (invalid -> 0, heading wrapped); returns (row valid, GNSS fresh)."""
     good = True
@@ -120,13 +120,13 @@ def _row(y, ok, fresh, j, vals, iprm, ist, k):
     return good, gnss
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _window_ok(ist, k, n):
     # rows k - n .. k exist and are valid (KinematicDetector._valid_window)
     return k >= n and ist[_S_LAST_BAD] < k - n
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _debias(r, prm, iprm, fs, ist):
     """``r - m`` after the warm-up, ``m <- m + g (r - m)``, ``g = max(1/n, dt/tau)``, frozen in alarm (in place).
 
@@ -160,7 +160,7 @@ def _debias(r, prm, iprm, fs, ist):
         r[i] = d if live else math.nan
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _finish(j, r, prm, iprm, fs, ist, out_z, out_valid, out_hyp, out_r):
     """Debias (if designed), then the test ``z = max |r_i| / s_i`` and the hypothesis (KinematicDetector._test)."""
     m = r.shape[0]
@@ -191,7 +191,7 @@ def _finish(j, r, prm, iprm, fs, ist, out_z, out_valid, out_hyp, out_r):
     out_hyp[j] = best
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _moving_mean(j_slot, k, z, i, na, ring, col_s, col_n, fs, f_s, ist):
     """Mean of the last ``na`` values of channel ``i`` (NaN until ``na`` rows, or with a NaN among them).
 
@@ -228,7 +228,7 @@ def _moving_mean(j_slot, k, z, i, na, ring, col_s, col_n, fs, f_s, ist):
 _FA_ED, _FA_I = 3, 6
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _solve_euler(a01, a02, a11, a12, a21, a22, b0, b1, b2):
     """``E x = b`` for ``E = [[1, a01, a02], [0, a11, a12], [0, a21, a22]]``, as OpenBLAS dgesv rounds it."""
     if abs(a21) > abs(a11):  # partial pivoting (the first of equal magnitudes stays)
@@ -246,7 +246,7 @@ def _solve_euler(a01, a02, a11, a12, a21, a22, b0, b1, b2):
     return x0, x1, x2
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _attitude(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, prm, iprm, fs, ist, ring, vals, r):
     _check(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, iprm[_Q_NCOL], 3)
     n = iprm[_Q_N_WIN]
@@ -294,7 +294,7 @@ _FH_I, _FH_V1, _FH_HELD, _FH_SUM = 2, 3, 4, 6
 _RH_H, _RH_I, _RH_S, _RH_N = 0, 1, 2, 3
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _altitude(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, prm, iprm, fs, ist, ring, vals, r):
     _check(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, iprm[_Q_NCOL], 2)
     n, na, nv = iprm[_Q_N_WIN], iprm[_Q_N_AVG], iprm[_Q_N_VALID]
@@ -351,7 +351,7 @@ def _altitude(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, prm, iprm, fs
 _FW_WIND, _FW_HELD, _FW_SUM = 2, 5, 7
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _vt_fps(h_ft, vc_kts, prm):
     """True airspeed [ft/s] from vc [kt] at pressure altitude [ft] (kinematic.vt_from_vc_fps)."""
     h = h_ft
@@ -371,7 +371,7 @@ def _vt_fps(h_ft, vc_kts, prm):
     return mach * a
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _air(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, prm, iprm, fs, ist, ring, vals, r, flow):
     m = 2 if flow else 1
     _check(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, iprm[_Q_NCOL], m)
