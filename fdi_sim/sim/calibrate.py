@@ -15,6 +15,7 @@ import os
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -49,12 +50,28 @@ def training_seeds(n: int) -> tuple[int, ...]:
     return tuple(TRAINING_SEED_BASE + i for i in range(n))
 
 
-def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress: bool = True) -> list[Any]:
-    """Fly the fault-free training flights; return their logs (read back, files removed)."""
+def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress: bool = True,
+                 label: str = "") -> list[Any]:
+    """Fly the fault-free training flights; return their logs (read back, files removed).
+
+    Parameters
+    ----------
+    sc : Scenario
+        Flown by :func:`fault_free` with each seed.
+    seeds : sequence of int
+    duration_s : float
+        Length of each flight [s].
+    progress : bool
+        One line on stderr, rewritten after each flight (flights done, sim s per s, ETA), only
+        when stderr is a terminal.
+    label : str
+        Put before the progress line (which calibration this is: ``"point 2/4 (h 12000 ft, vc 320 kt): "``).
+    """
     from fdi_sim.sim.run import run
 
     logs = []
     t0 = time.perf_counter()
+    show = progress and sys.stderr.isatty()
     with tempfile.TemporaryDirectory(prefix="fdi-sim-train-") as tmp:
         for i, seed in enumerate(seeds):
             res = run(fault_free(sc, seed, duration_s), tmp, progress=False)
@@ -66,12 +83,12 @@ def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress
                                   "fly without its faults")
             logs.append(read_log(res.log_path))
             Path(res.log_path).unlink()
-            if progress and sys.stderr.isatty():
+            if show:
                 el = time.perf_counter() - t0
                 rate = (i + 1) * duration_s / el
-                print(f"\rcalibration flights {i + 1}/{len(seeds)}  {rate:.0f} sim s/s  "
+                print(f"\r{label}calibration flights {i + 1}/{len(seeds)}  {rate:.0f} sim s/s  "
                       f"ETA {(len(seeds) - i - 1) * el / (i + 1):.0f} s", end="", file=sys.stderr, flush=True)
-    if progress and sys.stderr.isatty():
+    if show:
         print(file=sys.stderr)
     return logs
 
@@ -105,6 +122,30 @@ def calibration_key(sc: Scenario, design: Any, params: Mapping[str, Any], rate_h
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
+@dataclass(frozen=True, eq=False)
+class CachedCalibration:
+    """A calibrated ``kalman-gust-v1`` and where its calibration came from.
+
+    Attributes
+    ----------
+    detector : GustKalmanDetector
+    key : str
+        The cache key (:func:`calibration_key`).
+    path : Path
+        The cache entry ``<cache_dir>/<key>.json`` (written unless ``use_cache`` was False).
+    cached : bool
+        True when the calibration was read from the cache (no flight flown).
+    wall_s : float
+        Time the calibration took (flights, samples and quantile; or the cache read) [s].
+    """
+
+    detector: GustKalmanDetector
+    key: str
+    path: Path
+    cached: bool
+    wall_s: float
+
+
 def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n_flights: int = DEFAULT_TRAINING_FLIGHTS,
                            duration_s: float = DEFAULT_TRAINING_S, target: float = DEFAULT_TARGET,
                            params: Mapping[str, Any] | None = None, use_cache: bool = True,
@@ -125,8 +166,24 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
         The training flights already flown (seeds :func:`training_seeds`, ``duration_s`` each),
         for a caller that needs them for other detectors too; their length is checked.
     """
+    return gust_kalman_calibration(sc, model, rate_hz=rate_hz, n_flights=n_flights, duration_s=duration_s,
+                                   target=target, params=params, use_cache=use_cache, progress=progress,
+                                   training_logs=training_logs).detector
+
+
+def gust_kalman_calibration(sc: Scenario, model: Any, *, rate_hz: float = 20.0,
+                            n_flights: int = DEFAULT_TRAINING_FLIGHTS, duration_s: float = DEFAULT_TRAINING_S,
+                            target: float = DEFAULT_TARGET, params: Mapping[str, Any] | None = None,
+                            use_cache: bool = True, progress: bool = True,
+                            training_logs: Sequence[Any] | None = None, progress_label: str = "") -> CachedCalibration:
+    """:func:`calibrated_gust_kalman`, also saying which cache entry it used and whether it flew.
+
+    ``progress_label`` is put before the progress line of the training flights; the other
+    parameters are those of :func:`calibrated_gust_kalman`.
+    """
     from fdi_sim.detectors.catalogue_observers import make_gust_kalman
 
+    t0 = time.perf_counter()
     params = dict(params or {})
     params.setdefault("turbulence", sc.model.atmosphere.turbulence if sc.model.atmosphere.turbulence != "none"
                       else "light")  # a calm-air design still carries small gust states
@@ -139,7 +196,8 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
             cal = Calibration.from_dict(json.loads(path.read_text()))
         except (ValueError, KeyError, OSError):
             cal = None  # a damaged cache entry is recomputed
-    if cal is None or cal.sigma_m.shape != (det.design.model.n_outputs,) * 2:
+    cached = cal is not None and cal.sigma_m.shape == (det.design.model.n_outputs,) * 2
+    if not cached:
         seeds = training_seeds(n_flights)
         if training_logs is not None:
             logs = list(training_logs)
@@ -148,7 +206,7 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
                 raise DesignError(f"training_logs: {len(logs)} flights of {min(flown):g}-{max(flown):g} s given for "
                                   f"n_flights={n_flights} x duration_s={duration_s:g}")
         else:
-            logs = fly_training(sc, seeds, duration_s, progress=progress)
+            logs = fly_training(sc, seeds, duration_s, progress=progress, label=progress_label)
         flights = [log_samples(lg, det.design.model, rate_hz) for lg in logs]
         labels = [f"seed {s}, {duration_s:g} s, {sc.model.atmosphere.turbulence} turbulence, faults removed" for s in seeds]
         cal = calibrate(det.design, flights, target, labels)
@@ -160,5 +218,6 @@ def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n
                 os.replace(tmp, path)  # committed by rename: a crash leaves no half-written entry
             except OSError:
                 pass  # an unwritable cache only costs the next call the flights again
-    return GustKalmanDetector(det.design, cal, min_cosine=det.min_cosine, use_analytic_threshold=det.use_analytic)
-
+    assert cal is not None
+    detector = GustKalmanDetector(det.design, cal, min_cosine=det.min_cosine, use_analytic_threshold=det.use_analytic)
+    return CachedCalibration(detector, key, path, cached, time.perf_counter() - t0)
