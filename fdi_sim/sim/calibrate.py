@@ -39,9 +39,11 @@ DEFAULT_TARGET = 1e-4
 
 
 def fault_free(sc: Scenario, seed: int, duration_s: float) -> Scenario:
-    """The scenario without its faults and detectors, with another seed and duration."""
+    """The scenario without its faults, detectors and FDI bank, with full logs, another seed and duration."""
     data = json.loads(sc.to_json())
     data.update(faults=[], detectors=[], seed=int(seed), duration_s=float(duration_s))
+    data.pop("fdi", None)  # no bank in a training flight (it would need training itself), full logs
+    data.pop("log", None)
     data["maneuvers"] = [m for m in data.get("maneuvers", []) if float(m.get("t_start_s", 0.0)) < duration_s]
     return from_dict(data, source=f"{sc.source} (fault-free training flight, seed {seed})")
 
