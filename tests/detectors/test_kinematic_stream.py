@@ -168,9 +168,14 @@ def test_stream_gives_the_batch_numbers(flights: dict[str, Flight], name: str) -
         if kind == "altitude":  # no transcendental function: the same bits
             assert np.array_equal(out["statistic"], batch.statistic, equal_nan=True), diff
             assert np.array_equal(out["residual"], batch.r, equal_nan=True), diff
-        offline = _process(st, f.samples.t_s, *st.inputs(f.samples))
+        x = st.inputs(f.samples)
+        offline = _process(st, x.t_s, x.y, x.ok, x.fresh)
         for key in out:
             assert np.array_equal(out[key], offline[key], equal_nan=True), (kind, key)
+        again = st.run(f.samples, block=5)  # the offline convenience: run's record
+        for key, ref in (("statistic", out["statistic"]), ("valid", out["valid"]), ("r", out["residual"])):
+            assert np.array_equal(getattr(again, key), ref, equal_nan=True), (kind, key)
+        assert list(again.isolation) == _hypotheses(st, out["hypothesis"]), kind
         assert diff["n_valid"] > 0, kind
 
 
@@ -260,17 +265,17 @@ def test_bitwise_equal_to_run_with_the_c_library_functions(flights: dict[str, Fl
     check: the only differences in process are those functions' ulps (the remaining arithmetic,
     OpenBLAS's 3x3 solve included, is reproduced operation by operation)."""
     args = [f"{f.log_path}|{f.aircraft}|{f.turbulence}" for f in flights.values()]
-    proc = subprocess.run([sys.executable, "-c", _EXACT_SCRIPT, str(Path(__file__).parent), *args], env=_c_library_numpy_env(),
-                          capture_output=True, text=True, timeout=300, check=False)
+    proc = subprocess.run([sys.executable, "-c", _EXACT_SCRIPT, str(Path(__file__).parent), *args],
+                          env=_c_library_numpy_env(), capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr[-3000:]
     res = json.loads(proc.stdout.strip().splitlines()[-1])
     assert res and all(all(v) for v in res.values()), {k: v for k, v in res.items() if not all(v)}
 
 
 def _synthetic(n: int = 1100, seed: int = 5) -> Samples:
-    """A consistent flight by formula at 20 Hz with steps at t = 36 s in q, vc and alpha and at 45 s in v_down; heading through
-    +-pi, GNSS first fresh at row 260 then every other row but for a 220-row gap, a NaN flagged valid,
-    dropouts of theta and v_down."""
+    """A consistent flight by formula at 20 Hz, steps at t = 36 s in q, vc and alpha and at 45 s in v_down:
+    heading through +-pi, GNSS first fresh at row 260 then every other row but for a 220-row gap, a NaN
+    flagged valid, dropouts of theta and v_down."""
     rng = np.random.default_rng(seed)
     t = (np.arange(n) + 1) / RATE_HZ
     col = {nm: np.zeros(n) for nm in MEASUREMENTS}
@@ -319,7 +324,8 @@ def test_synthetic_corners(kind: str) -> None:
         det = KinematicDetector(dd)
         st = KinematicStream(det)
         batch = det.run(s)
-        y, ok, fresh = st.inputs(s)
+        x = st.inputs(s)
+        y, ok, fresh = x.y, x.ok, x.fresh
         out = _process(st, s.t_s, y, ok, fresh)
         _compare(st, out, batch)
         part = _process(st, s.t_s, y, ok, fresh, blocks=[3, 0, 1, 250, 11] + [5] * 167)
@@ -335,15 +341,17 @@ def test_synthetic_corners(kind: str) -> None:
 def test_reset_and_bad_shapes() -> None:
     st = KinematicStream(KinematicDetector(design("altitude", "f16", "none")))
     s = _synthetic(400)
-    args = (s.t_s, *st.inputs(s))
+    x = st.inputs(s)
+    args = (x.t_s, x.y, x.ok, x.fresh)
     first = _process(st, *args)
-    st.process(*(a[:50] for a in args), np.empty(50), np.empty(50, bool), np.empty(50, np.int64), np.empty((50, 2)))
+    st.process(*(a[:50] for a in args), np.empty(50), np.empty(50, bool), np.empty(50, np.int64),
+               np.empty((50, 2)))
     again = _process(st, *args)  # _process resets first
     for key in first:
         assert np.array_equal(first[key], again[key], equal_nan=True)
     with pytest.raises(ValueError, match="must agree"):
-        st.process(s.t_s[:5], np.ascontiguousarray(args[1][:5, :2]), args[2][:5], args[3][:5], np.empty(5), np.empty(5, bool),
-                   np.empty(5, np.int64), np.empty((5, 2)))
+        st.process(s.t_s[:5], np.ascontiguousarray(args[1][:5, :2]), args[2][:5], args[3][:5], np.empty(5),
+                   np.empty(5, bool), np.empty(5, np.int64), np.empty((5, 2)))
 
 
 def test_a_block_costs_microseconds() -> None:
@@ -352,7 +360,8 @@ def test_a_block_costs_microseconds() -> None:
     s = _synthetic(600)
     for kind in KINDS:
         st = KinematicStream(KinematicDetector(design(kind, "f16", "light")))
-        t_s, (y, ok, fresh) = s.t_s, st.inputs(s)
+        x = st.inputs(s)
+        t_s, y, ok, fresh = x.t_s, x.y, x.ok, x.fresh
         oz, ov, oh, orr = np.empty(5), np.empty(5, bool), np.empty(5, np.int64), np.empty((5, len(st.channels)))
         st.process(t_s[:5], y[:5], ok[:5], fresh[:5], oz, ov, oh, orr)  # compile or load
         st.reset()
