@@ -251,7 +251,10 @@ print(json.dumps(res))
 def _c_library_numpy_env() -> dict[str, str]:
     """Environment in which numpy does not dispatch its AVX-512 (SVML) loops: its ``tan``, ``arctan2``,
     ``arcsin`` and pow are then the C library's, which numba calls."""
-    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    except ImportError:  # numpy < 2
+        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
     off = [f for f in __cpu_dispatch__ if ("512" in f or f == "X86_V4") and __cpu_features__.get(f)]
     env = dict(os.environ)
