@@ -31,9 +31,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if dropped:
             print(f"note: --duration {args.duration:g} s drops {dropped} maneuver/fault entries that start later",
                   file=sys.stderr)
-    if sc.detectors:  # sim.run flies pilot, faults and sensors only: say so rather than drop them silently
-        print(f"note: the {len(sc.detectors)} [[detectors]] entries are not run by `fdi-sim run` yet (their ids and "
-              "options are checked); run them on the log with `fdi-sim detect LOG --detector ID`", file=sys.stderr)
+    from fdi_sim.sim.bank_design import bank_members
+
+    bank_members(sc)  # a detector that cannot run in the loop is refused before anything flies
     res = run(sc, args.out, log_path=args.log, progress=None if not args.quiet else False, force=args.force)
     print(res.summary.format())
     print(f"log        {res.log_path}")

@@ -28,6 +28,8 @@ MIN_EMPIRICAL = 10
 #: exceedances the tail fit aims for, and the fewest it accepts
 TAIL_EXCEEDANCES = 1000
 MIN_TAIL = 50
+#: the largest tail fraction fitted
+Q_MAX = 0.02
 
 
 def tail_threshold(x: NDArray[np.float64], p: float) -> tuple[float, str]:
@@ -57,9 +59,9 @@ def tail_threshold(x: NDArray[np.float64], p: float) -> tuple[float, str]:
     n = x.size
     if n * p >= MIN_EMPIRICAL:
         return float(np.quantile(x, 1.0 - p)), f"empirical ({n * p:.0f} exceedances expected of {n} samples)"
-    q = min(0.02, TAIL_EXCEEDANCES / max(n, 1))
+    q = min(Q_MAX, TAIL_EXCEEDANCES / max(n, 1))
     if n * q < MIN_TAIL:
-        raise DesignError(f"{n} training samples are too few for a tail fit ({MIN_TAIL * 20} at least); fly more "
+        raise DesignError(f"{n} training samples are too few for a tail fit ({MIN_TAIL / Q_MAX:.0f} at least); fly more "
                           "or longer calibration flights")
     u = float(np.quantile(x, 1.0 - q))
     z = x[x > u] - u

@@ -356,6 +356,22 @@ class VectorChannel:
         self._t.append(t_s)
         self._b.append(b)
 
+    def write_rows(self, t_s: NDArray[np.float64], values: NDArray[np.float64]) -> None:
+        """Log several rows at once (a detector block): ``t_s`` (N,) increasing [s], ``values``
+        (N, len(fields) - 1). The same messages as N calls of :meth:`write`."""
+        t = np.asarray(t_s, dtype=np.float64)
+        v = np.asarray(values)
+        n = len(t)
+        if n == 0:
+            return
+        if (v.shape == (n,) + self._shape and 0.0 <= t[0] and t[-1] < self._w._hi_t_s
+                and (n == 1 or bool(np.all(np.diff(t) >= 0)))):
+            self._t.extend(t.tolist())
+            self._b.append(np.ascontiguousarray(v, dtype="<f8").tobytes())
+            return
+        for i in range(n):  # a block across a flush window, or bad input (the general checks)
+            self.write(float(t[i]), np.ascontiguousarray(v[i], dtype=np.float64) if v.ndim == 2 else v[i])
+
     def _values_slow_path(self, values: Any) -> bytes:
         if not isinstance(values, np.ndarray):
             try:

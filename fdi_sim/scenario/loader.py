@@ -96,8 +96,14 @@ class Scenario:
         return self.replace(duration_s=duration_s, maneuvers=maneuvers, faults=faults), dropped
 
     def to_json(self) -> str:
-        """Canonical JSON of the validated scenario (stored in every log)."""
-        return self.model.model_dump_json()
+        """Canonical JSON of the validated scenario (stored in every log).
+
+        The ``fdi`` and ``log`` sections are left out while they hold their defaults, so that the
+        logs of scenarios without them are the same bytes as before those sections existed."""
+        from fdi_sim.scenario.schema import FdiSection, LogSection
+
+        exclude = {k for k, d in (("fdi", FdiSection()), ("log", LogSection())) if getattr(self.model, k) == d}
+        return self.model.model_dump_json(exclude=exclude or None)
 
 
 #: largest scenario file read [bytes]; shipped scenarios are a few kB (a guard against /dev/zero and the like)
@@ -342,11 +348,26 @@ def _cross_checks(sc: Scenario) -> None:
     from fdi_sim.faults.check import check_faults
 
     check_faults(sc)
+    _check_fdi(sc)
     for i, (tid, p) in enumerate(sc.maneuvers):
         t0 = getattr(p, "t_start_s", 0.0)
         if t0 >= m.duration_s:
             raise ScenarioError(sc.source, f"maneuvers[{i}].t_start_s", f"starts at {t0} s, after the run ends ({m.duration_s} s)",
                                 "start it earlier or lengthen duration_s")
+
+
+def _check_fdi(sc: Scenario) -> None:
+    """The detector rate divides the simulation rate; the block is a whole number of samples."""
+    f, rate = sc.model.fdi, float(sc.model.rate_hz)
+    d = rate / f.rate_hz
+    if abs(d - round(d)) > 1e-9 or round(d) < 1:
+        ok = [f"{rate / k:g}" for k in range(1, int(rate) + 1) if abs(rate / k - round(rate / k)) < 1e-9][:10]
+        raise ScenarioError(sc.source, "fdi.rate_hz", f"{f.rate_hz:g} Hz does not divide the simulation rate "
+                            f"{rate:g} Hz", f"use one of {', '.join(ok)} Hz")
+    b = f.block_s * f.rate_hz
+    if abs(b - round(b)) > 1e-9 or round(b) < 1:
+        raise ScenarioError(sc.source, "fdi.block_s", f"{f.block_s:g} s is not a whole number of detector samples "
+                            f"at {f.rate_hz:g} Hz", f"use a multiple of {1.0 / f.rate_hz:g} s")
 
 
 def _model_fields(model: type[BaseModel], loc: tuple[Any, ...]) -> dict[str, Any]:

@@ -73,6 +73,39 @@ class LimitsSection(_Section):
     vc_min_kts: float = Field(default=50.0, ge=0.0, le=500.0)
 
 
+class FdiSection(_Section):
+    """The FDI bank flown in the loop (``fdi_sim.sim.bank``)."""
+
+    bank: Literal["none", "default"] = Field(default="none", description="named bank (per aircraft) or none")
+    rate_hz: float = Field(default=20.0, gt=0.0, le=240.0, description="detector rate [Hz]; divides rate_hz")
+    block_s: float = Field(default=0.25, gt=0.0, le=5.0, description="the bank runs every block_s [s]")
+    far_per_h: float = Field(default=0.1, gt=0.0, lt=1.0,
+                             description="design false-alarm rate of the whole bank [1/flight hour], in (0, 1)")
+    persistence_k: int = Field(default=3, ge=1, le=100, description="alarm when k of the last n samples exceed")
+    persistence_n: int = Field(default=5, ge=1, le=100)
+    arm_s: float = Field(default=5.0, ge=0.0, le=600.0, description="the bank decides from this time on [s]")
+    confirm_s: float = Field(default=0.5, gt=0.0, le=60.0, description="isolation votes before reconfiguring [s]")
+    reconfigure: bool = True
+    schedule: Literal["auto", "off"] = Field(default="auto", description="gain-schedule the model-based detectors")
+    on_design_failure: Literal["refuse", "skip"] = "refuse"
+    log_residuals: bool = True
+    calibration_flights: int = Field(default=24, ge=2, le=1000)
+    calibration_duration_s: float = Field(default=300.0, ge=10.0, le=36000.0)
+
+    @model_validator(mode="after")
+    def _kn(self) -> "FdiSection":
+        if self.persistence_k > self.persistence_n:
+            raise ValueError(f"persistence_k = {self.persistence_k} exceeds persistence_n = {self.persistence_n}")
+        return self
+
+
+class LogSection(_Section):
+    """What the log holds."""
+
+    per_step: bool = Field(default=True, description="the 120 Hz topics (truth, sensors, commands...); "
+                           "false keeps only the FDI topics, as a Monte Carlo run would")
+
+
 class ScenarioModel(_Section):
     """The whole scenario file."""
 
@@ -87,6 +120,8 @@ class ScenarioModel(_Section):
     autopilot: AutopilotSection = AutopilotSection()
     sensors: SensorsSection = SensorsSection()
     limits: LimitsSection = LimitsSection()
+    fdi: FdiSection = FdiSection()
+    log: LogSection = LogSection()
     # TOML arrays (and JSON) give lists: not strict; the entries are validated by their plugin
     maneuvers: tuple[dict[str, Any], ...] = Field(default=(), strict=False)
     faults: tuple[dict[str, Any], ...] = Field(default=(), strict=False)

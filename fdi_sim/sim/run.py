@@ -53,6 +53,7 @@ from fdi_sim.flightlog.records import MCAP_MAGIC
 from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimPoint
 from fdi_sim.scenario import Scenario
 from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
+from fdi_sim.sim.bank import BankAlarm, FaultDetection, FdiBank, fdi_outcomes
 from fdi_sim.units import DEG_PER_RAD, RAD_PER_DEG
 
 OP_SIGNALS = ("h_ft", "vc_kts", "mach", "alpha_rad", "flaps_deg", "icing_eta")
@@ -162,6 +163,11 @@ class RunSummary:
     max_abs_dphi_deg: float
     trim_throttle_norm: float
     trim_alpha_deg: float
+    fdi_detectors: tuple[str, ...] = ()
+    fdi_detections: tuple[FaultDetection, ...] = ()
+    fdi_false_alarms: tuple[BankAlarm, ...] = ()
+    fdi_reconfigurations: tuple[dict, ...] = ()
+    fdi_notes: tuple[str, ...] = ()
 
     @property
     def realtime_factor(self) -> float:
@@ -176,6 +182,25 @@ class RunSummary:
             f"holds      max |dh| {self.max_abs_dh_ft:.1f} ft, max |dVc| {self.max_abs_dvc_kts:.2f} kt (gust removed), "
             f"max |dphi| {self.max_abs_dphi_deg:.2f} deg",
         ]
+        if self.fdi_detectors:
+            lines.append(f"fdi bank   {', '.join(self.fdi_detectors)}")
+            lines += [f"           {n}" for n in self.fdi_notes]
+            for d in self.fdi_detections:
+                if d.detected_t_s is None:
+                    lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} not detected")
+                else:
+                    iso = d.isolation or "not isolated"
+                    mark = "" if d.isolation_correct is None else (" (right)" if d.isolation_correct else " (wrong)")
+                    lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} detected at "
+                                 f"{d.detected_t_s:.2f} s (delay {d.delay_s:.2f} s), isolated as {iso}{mark}")
+            for r in self.fdi_reconfigurations:
+                lines.append(f"  reconfigured {r['sensor']} at {r['t_s']:.2f} s ({r['action']}, by {r['detector']})")
+            if self.fdi_false_alarms:
+                for a in self.fdi_false_alarms:
+                    end = "open" if a.end_t_s is None else f"to {a.end_t_s:.2f} s"
+                    lines.append(f"  FALSE ALARM {a.detector} at {a.onset_t_s:.2f} s ({end}), isolated as {a.isolation}")
+            else:
+                lines.append("  false alarms: none")
         return "\n".join(lines)
 
 
@@ -218,6 +243,34 @@ def build_sensors(sc: Scenario, dt_s: float) -> SensorSuite:
     overrides = {k: v.model_dump(exclude_none=True) for k, v in s.overrides.items()}
     specs = load_suite(sc.aircraft, s.suite)  # suite and override names checked by the scenario loader
     return SensorSuite(apply_overrides(specs, s.noise_scale, s.biases, overrides), truth_signals(sc.aircraft), dt_s)
+
+
+#: metadata record describing the in-loop bank (members, designs, thresholds)
+METADATA_FDI = "fdi"
+
+
+def build_loop_bank(sc: Scenario, sensors: SensorSuite, progress: bool | None) -> FdiBank | None:
+    """The scenario's bank (None without one); designs and calibrations come from the cache or are
+    computed now (training flights, with a progress line on a terminal)."""
+    from fdi_sim.sim.bank_design import bank_members, build_bank
+
+    if not bank_members(sc):
+        return None
+    return build_bank(sc, meas_names=sensors.names, cmd_names=PILOT_FIELDS,
+                      sensor_rates_hz={s.name: s.rate_hz for s in sensors.specs}, pilot_sensors=sensors.names,
+                      progress=progress is not False)
+
+
+def bank_metadata(bank: FdiBank) -> dict[str, str]:
+    """The bank as strings for the log's metadata (what a replay and a reviewer need)."""
+    members = [{"id": m.id, "kind": m.kind, "hypotheses": list(m.hypotheses), "outputs": list(m.output_names),
+                "residuals": list(m.residual_names), "threshold": float(m.thr[0]) if m.kind != "gust" else
+                float(m.stream._thr[0])} for m in bank.members]
+    return {"members": json.dumps(members), "rate_hz": f"{bank.rate_hz:g}", "block_samples": str(bank.S),
+            "decision": json.dumps({"k": bank.decision.k, "n": bank.decision.n,
+                                    "confirm_samples": bank.decision.confirm_samples}),
+            "reconfigure": json.dumps(bank.reconfigure), "notes": json.dumps(list(bank.notes)),
+            "calibration": json.dumps(getattr(bank, "calibration", None))}
 
 
 def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | None = None,
@@ -284,6 +337,9 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     stop = StopRequest()
     status, reason = "error", ""
     stats = np.zeros(3)
+    steps = 0
+    bank = None
+    injector = None
     tr = None
     ch_truth = None
     wall0 = time.perf_counter()
@@ -297,6 +353,9 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             ac.set_atmosphere(Atmosphere(), jsbsim_seed)
             sensors = build_sensors(sc, sc.dt_s)
             sensors.reset(np.random.default_rng(ss_sensors))
+            # the bank before the aircraft is trimmed: its designs may fly calibration flights
+            bank = build_loop_bank(sc, sensors, progress)
+            per_step = sc.model.log.per_step
             injector = None
             op = sc.operating_point()
             if fault_defs:
@@ -319,29 +378,38 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             ac.set_atmosphere(atm, jsbsim_seed)
             pilot = build_pilot(sc, tr, sensors.names)
             pilot.reset(np.random.default_rng(ss_pilot))
-            ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + truth_signals(sc.aircraft))
-            ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
-            ch_op = writer.add_vector_channel(TOPIC_OPERATING_POINT, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
-            ch_cmd = writer.add_vector_channel(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
-            ch_meas = writer.add_vector_channel(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
+            ch_truth = ch_surf = ch_op = ch_cmd = ch_meas = None
+            if per_step:  # without: status, fault events and the FDI topics only, as a Monte Carlo run logs
+                ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + truth_signals(sc.aircraft))
+                ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
+                ch_op = writer.add_vector_channel(TOPIC_OPERATING_POINT, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
+                ch_cmd = writer.add_vector_channel(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
+                ch_meas = writer.add_vector_channel(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
             ch_status = writer.add_event_channel(TOPIC_SIM_STATUS, "fdi_sim/msg/SimStatus", STATUS_JSON_SCHEMA)
             ch_status.write(0.0, {"status": "running", "message": f"trimmed ({tr.method} trim), flying"})
             fault_channels = None
             if injector is not None:
                 fault_channels = (
-                    writer.add_vector_channel(TOPIC_FAULTS, "fdi_sim/msg/FaultTruth", ("t_s",) + injector.truth_fields),
+                    writer.add_vector_channel(TOPIC_FAULTS, "fdi_sim/msg/FaultTruth", ("t_s",) + injector.truth_fields)
+                    if per_step else None,
                     writer.add_event_channel(TOPIC_FAULT_EVENTS, "fdi_sim/msg/FaultEvent", FAULT_EVENT_JSON_SCHEMA),
                     writer.add_vector_channel(TOPIC_SENSORS_VALID, "fdi_sim/msg/SensorValid", ("t_s",) + sensors.names)
-                    if injector.has_dropout else None,
+                    if injector.has_dropout and per_step else None,
                 )
+            if bank is not None:
+                bank.attach(writer, log_residuals=sc.model.fdi.log_residuals)
+                bank.start_at(sc.model.initial.h_ft, tr.vc_kts)
+                writer.add_metadata(METADATA_FDI, bank_metadata(bank))
             if stop.requested:  # a signal whose KeyboardInterrupt was swallowed during the set-up
                 raise KeyboardInterrupt
             # from here on a stop request only sets a flag that the loop reads once per step
             stop.start_flight()
             writer.move_to(out)
             flying = True
-            status, reason, t_status_s, stats = _loop(sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas),
-                                                      progress, injector, fault_channels, stop)
+            wall0 = time.perf_counter()  # the loop's wall time (the set-up, trim and bank design before it)
+            status, reason, t_status_s, stats, steps = _loop(sc, ac, sensors, pilot,
+                                                             (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress,
+                                                             injector, fault_channels, stop, bank, per_step)
             ch_status.write(t_status_s, {"status": status, "message": reason})
         except KeyboardInterrupt:
             if flying:  # raised by hand inside the loop's callees: still a finished log
@@ -357,13 +425,19 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             if flying:
                 writer.close()
     wall = time.perf_counter() - wall0
-    t_end_s = _last_time(ch_truth)
+    t_end_s = (steps - 1) * sc.dt_s if steps else 0.0
+    fdi: dict = {}
+    if bank is not None:
+        faults = injector.catalog() if injector is not None else []
+        det, false = fdi_outcomes(bank.alarms, faults, [m.id for m in bank.members], t_end_s)
+        fdi = dict(fdi_detectors=tuple(m.id for m in bank.members), fdi_detections=det, fdi_false_alarms=false,
+                   fdi_reconfigurations=tuple(bank.reconfig_events), fdi_notes=bank.notes)
     summary = RunSummary(
         scenario=sc.name, aircraft=sc.aircraft, seed=sc.seed, status=status, reason=reason, t_end_s=t_end_s,
-        steps=ch_truth.rows_written if ch_truth is not None else 0,
+        steps=steps,
         wall_s=wall, max_abs_dh_ft=float(stats[0]), max_abs_dvc_kts=float(stats[1]), max_abs_dphi_deg=float(stats[2]),
         trim_throttle_norm=tr.throttle_cmd_norm if tr else math.nan,
-        trim_alpha_deg=tr.alpha_rad * DEG_PER_RAD if tr else math.nan,
+        trim_alpha_deg=tr.alpha_rad * DEG_PER_RAD if tr else math.nan, **fdi,
     )
     return RunResult(log_path=out, status=status, summary=summary)
 
@@ -423,8 +497,15 @@ def check_log_path(out: Path, scenario_source: str, *, force: bool = False) -> N
 
 
 def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channels: tuple, progress: bool | None,
-          inj: FaultInjector | None, fault_channels: tuple | None, stop: StopRequest):
-    """The per-step loop; returns (status, reason, time of the status [s], max deviations)."""
+          inj: FaultInjector | None, fault_channels: tuple | None, stop: StopRequest, bank: FdiBank | None = None,
+          per_step: bool = True):
+    """The per-step loop; returns (status, reason, time of the status [s], max deviations, steps).
+
+    ``steps`` counts the steps whose measurements, commands and (with ``per_step``) log rows are
+    complete: rows 0 .. steps-1. With a bank, every detector sample ``j`` is taken at step ``j n``
+    (module :mod:`fdi_sim.sim.bank`): the measurement row before the pilot, the command row after
+    it, the block run before the pilot of its last step (so a reconfiguration acts on that step).
+    """
     ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
     ch_ftruth, ch_fevents, ch_valid = fault_channels if fault_channels else (None, None, None)
     # Python floats end to end: lists in, struct-packed rows out (no numpy call per step)
@@ -454,6 +535,18 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     t_s = 0.0
     eta = 0.0
     last_shown = 0
+    steps = 0
+    # the bank's buffers: a sample every n_fdi steps, a block every K steps (never a division by 0
+    # without a bank: those steps never come)
+    if bank is not None:
+        n_fdi, K, S = bank.n, bank.K, bank.S
+        cmd_rows, meas_rows, valid_rows = bank.cmd_rows, bank.meas_rows, bank.valid_rows
+    else:
+        n_fdi = K = S = n_steps + 2
+        cmd_rows = meas_rows = valid_rows = None
+    next_sample = n_fdi
+    corrected = False
+    has_dropout = inj is not None and inj.has_dropout
     try:
         for k in range(n_steps + 1):
             if stop.requested:  # between two steps: every topic holds steps 0 .. k-1
@@ -477,17 +570,32 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
             if xl[i_vc] < vc_min:
                 raise SimulationDiverged(t_s, f"airspeed {xl[i_vc]:.1f} kt below {vc_min}")
             y = measure(t_s, xl)
-            if inj is None:
-                _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y)  # PilotCommand fields
-                write_cmd(el, ai, ru, th)
-            else:  # faults: sensors -> pilot -> commands -> plant (surfaces, engines, icing)
+            if inj is not None:
                 inj.begin_step(t_s)
                 y = inj.sensors(t_s, k, y, xl)
-                _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y)
+            # --- the FDI bank: the sample's measurement; at a block's end, the block ---------------
+            if k == next_sample:
+                jb = (k // n_fdi - 1) % S
+                meas_rows[jb] = y
+                if has_dropout:
+                    valid_rows[jb] = inj.valid
+                next_sample += n_fdi
+                if k % K == 0:
+                    if bank.end_block(k, dt):
+                        corrected = True
+            y_pilot = bank.pilot_input(y) if corrected else y
+            if inj is None:
+                _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y_pilot)  # PilotCommand fields
+                write_cmd(el, ai, ru, th)
+            else:  # faults: sensors -> pilot -> commands -> plant (surfaces, engines, icing)
+                _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y_pilot)
                 write_cmd(*inj.commands(t_s, el, ai, ru, th))
                 inj.after_commands()
                 inj.plant(t_s, xl)
                 eta = inj.icing_eta
+            cmd = (el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref, pitch_trim)
+            if cmd_rows is not None:
+                cmd_rows[k % K] = cmd
             # --- statistics: deviation from the references (airspeed relative to the steady air) --
             v_air = math.sqrt((xl[i_vn] - wn) ** 2 + (xl[i_ve] - we) ** 2 + xl[i_vd] ** 2)
             dv = abs(xl[i_vc] * v_air / xl[i_vt] - vc_ref)
@@ -500,22 +608,25 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
             if dphi > max_dphi:
                 max_dphi = dphi
             # --- log ------------------------------------------------------------------------
-            ch_truth.write(t_s, xl)
-            ch_meas.write(t_s, y)
-            if inj is not None:
-                ch_ftruth.write(t_s, inj.truth_row())
-                if inj.events:
-                    for te, ev in inj.pop_events():
-                        ch_fevents.write(te, ev)
-                if ch_valid is not None:
-                    ch_valid.write(t_s, inj.valid)
-            ch_cmd.write(t_s, (el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref, pitch_trim))
-            ch_op.write(t_s, (xl[i_h], xl[i_vc], xl[i_mach], xl[i_alpha], flaps_deg, eta))
+            if per_step:
+                ch_truth.write(t_s, xl)
+                ch_meas.write(t_s, y)
+                if inj is not None:
+                    ch_ftruth.write(t_s, inj.truth_row())
+                    if ch_valid is not None:
+                        ch_valid.write(t_s, inj.valid)
+                ch_cmd.write(t_s, cmd)
+                ch_op.write(t_s, (xl[i_h], xl[i_vc], xl[i_mach], xl[i_alpha], flaps_deg, eta))
+            if inj is not None and inj.events:
+                for te, ev in inj.pop_events():
+                    ch_fevents.write(te, ev)
+            steps = k + 1
             if k == n_steps:
                 break
             if not ac.step():
                 raise SimulationDiverged(t_s, "JSBSim stopped the run")
-            ch_surf.write(t_s, read_surf())
+            if per_step:
+                ch_surf.write(t_s, read_surf())
             if bar is not None and k - last_shown >= 120:
                 bar.update((k - last_shown) * dt)
                 last_shown = k
@@ -526,7 +637,10 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     finally:
         if bar is not None:
             bar.close()
-    return status, reason, t_s, np.array([max_dh, max_dv, max_dphi])
+        if bank is not None and steps:
+            # the partial last block: samples whose step completed (the replay of the log sees the same)
+            bank.flush(steps - 1, dt)
+    return status, reason, t_s, np.array([max_dh, max_dv, max_dphi]), steps
 
 
 def _progress_bar(sc: Scenario, progress: bool | None):

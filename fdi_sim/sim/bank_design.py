@@ -1,0 +1,300 @@
+"""Building the in-loop FDI bank of a scenario: which detectors, their designs and thresholds.
+
+``[fdi] bank = "default"`` gives every aircraft the detectors ``docs/detectors.md`` finds working
+on it (:data:`DEFAULT_BANKS`); ``[[detectors]]`` entries add to it (or make the bank on their
+own). Only detectors with a streaming kernel run in the loop (:data:`IN_LOOP`); the others run
+offline (``fdi-sim detect``).
+
+Designs: ``kalman-gust-v1`` at the schedule points the flight crosses
+(:func:`fdi_sim.sim.designs.schedule_points`, gain-scheduled when there is more than one and
+``schedule = "auto"``), each calibrated (``Sigma_m``) on fault-free training flights; the
+kinematic checks from their catalogue. Thresholds: the bank's design false-alarm rate
+``far_per_h`` is split evenly over its detectors and over the samples of an hour (a union bound:
+an alarm onset needs an exceedance), ``p = far_per_h / (detectors x rate_hz x 3600)`` per
+sample, and each detector's threshold is the ``1 - p`` quantile of its statistic on the training
+flights, extrapolated by a generalized Pareto tail where the flights hold fewer than ten
+exceedances of it (:func:`fdi_sim.decision.tail.tail_threshold`).
+"""
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from fdi_sim import __version__, registry
+from fdi_sim.errors import DesignError, ScenarioError
+from fdi_sim.scenario import Scenario
+
+S_PER_H = 3600.0
+
+#: the detectors a new user gets, per aircraft (``docs/detectors.md``: the ones that work on it)
+DEFAULT_BANKS: dict[str, tuple[str, ...]] = {
+    "f16": ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1"),
+    "DHC6": ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1"),
+}
+#: detectors with a streaming kernel, and its kind
+IN_LOOP: dict[str, str] = {
+    "kalman-gust-v1": "gust",
+    "kinematic-attitude-v1": "kinematic",
+    "kinematic-altitude-v1": "kinematic",
+    "kinematic-airspeed-v1": "kinematic",
+    "kinematic-flow-angles-v1": "kinematic",
+}
+#: keys of a [[detectors]] entry that are not design options
+ENTRY_KEYS = ("type", "n_flights", "duration_s", "target")
+
+
+@dataclass(frozen=True)
+class MemberSpec:
+    """One detector of a scenario's bank: id and design options."""
+
+    id: str
+    params: dict[str, Any]
+    source: str  # "bank" or "detectors[i]"
+
+
+def bank_members(sc: Scenario) -> list[MemberSpec]:
+    """The detectors a scenario's bank runs (empty: no bank)."""
+    out: list[MemberSpec] = []
+    f = sc.model.fdi
+    if f.bank != "none":
+        out += [MemberSpec(i, {}, "bank") for i in DEFAULT_BANKS[sc.aircraft]]
+    for i, (tid, params) in enumerate(sc.detectors):
+        key = f"detectors[{i}]"
+        if tid not in IN_LOOP:
+            close = difflib.get_close_matches(tid, list(IN_LOOP), n=1)
+            raise ScenarioError(sc.source, f"{key}.type", f"{tid!r} has no streaming kernel and cannot run in the loop"
+                                + (f" (did you mean {close[0]!r}?)" if close else ""),
+                                f"in the loop: {', '.join(IN_LOOP)}; run {tid} offline with `fdi-sim detect LOG "
+                                f"--detector {tid}`")
+        p = dict(params) if isinstance(params, dict) else dict(getattr(params, "model_dump", lambda: {})())
+        p = {k: v for k, v in p.items() if k != "type"}
+        spec = MemberSpec(tid, p, key)
+        out = [m for m in out if m.id != tid] + [spec]  # an entry replaces the bank's detector of that id
+    return out
+
+
+def per_sample_target(far_per_h: float, n_detectors: int, rate_hz: float) -> float:
+    """``far_per_h / (n_detectors rate_hz 3600)``: each detector's per-sample exceedance probability
+    that keeps the bank's alarm onsets below ``far_per_h`` per flight hour (union bound)."""
+    return float(far_per_h) / (max(1, n_detectors) * float(rate_hz) * S_PER_H)
+
+
+def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[str],
+               sensor_rates_hz: dict[str, float], pilot_sensors: Sequence[str], progress: bool = True,
+               training_logs: Sequence[Any] | None = None) -> Any:
+    """The scenario's :class:`~fdi_sim.sim.bank.FdiBank`, designed and calibrated (cached on disk).
+
+    Raises
+    ------
+    ScenarioError
+        A detector that cannot run in the loop.
+    DesignError
+        A detector that cannot be designed (``on_design_failure = "refuse"``), with where and why.
+    """
+    from fdi_sim.sim.bank import DecisionConfig, FdiBank
+
+    members = bank_members(sc)
+    if not members:
+        return None
+    f = sc.model.fdi
+    # the training flights are flown at most once, and only if some calibration is not cached
+    logs = training_logs if training_logs is not None else LazyTraining(sc, progress)
+    streams, notes = [], []
+    for m in members:
+        kind = IN_LOOP[m.id]
+        if kind == "gust":
+            stream, note = _gust_stream(sc, m, progress=progress, training_logs=logs)
+        else:
+            stream, note = _kinematic_stream(sc, m)
+        streams.append((kind, stream))
+        notes.append(note)
+    S = int(round(f.block_s * f.rate_hz))
+    decision = DecisionConfig(f.persistence_k, f.persistence_n, max(1, int(round(f.confirm_s * f.rate_hz))))
+    bank = FdiBank(streams, cmd_names=cmd_names, meas_names=meas_names, sensor_rates_hz=sensor_rates_hz,
+                   sim_rate_hz=float(sc.model.rate_hz), rate_hz=f.rate_hz, block_samples=S, decision=decision,
+                   reconfigure=f.reconfigure, pilot_sensors=pilot_sensors, notes=tuple(notes), arm_s=f.arm_s)
+    p = per_sample_target(f.far_per_h, len(streams), f.rate_hz)
+    calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
+    return bank
+
+
+class LazyTraining:
+    """The scenario's fault-free training flights, flown on first use (then kept)."""
+
+    def __init__(self, sc: Scenario, progress: bool) -> None:
+        self.sc, self.progress = sc, progress
+        self.n = sc.model.fdi.calibration_flights
+        self._logs: list[Any] | None = None
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __iter__(self):
+        if self._logs is None:
+            from fdi_sim.sim.calibrate import fly_training, training_seeds
+
+            f = self.sc.model.fdi
+            self._logs = fly_training(self.sc, training_seeds(self.n), f.calibration_duration_s,
+                                      progress=self.progress)
+        return iter(self._logs)
+
+
+def _gust_stream(sc: Scenario, m: MemberSpec, *, progress: bool, training_logs: Any = None) -> tuple[Any, str]:
+    from fdi_sim.detectors.gust_kalman_stream import GustKalmanStream
+    from fdi_sim.detectors.scheduled import GustKalmanSchedule
+    from fdi_sim.sim.calibrate import calibrated_gust_kalman
+    from fdi_sim.sim.detect import CALIBRATION_OPTIONS, model_for_scenario
+
+    f = sc.model.fdi
+    cal_opts = {"n_flights": f.calibration_flights, "duration_s": f.calibration_duration_s}
+    cal_opts.update({k: v for k, v in m.params.items() if k in CALIBRATION_OPTIONS})
+    design_opts = {k: v for k, v in m.params.items() if k not in CALIBRATION_OPTIONS + ("rate_hz", "min_cosine")}
+    min_cos = float(m.params.get("min_cosine", 0.7))
+    points = _schedule_points(sc) if f.schedule == "auto" else []
+    if len(points) > 1:
+        from fdi_sim.sim.designs import design_schedule
+
+        sched = design_schedule(sc, points, rate_hz=f.rate_hz, params=design_opts, on_failure=f.on_design_failure,
+                                progress=progress, **cal_opts)
+        note = f"{m.id}: gain-scheduled over {sched.n_points} points ({'; '.join(sched.label(i) for i in range(sched.n_points))})"
+    else:
+        try:
+            lm = model_for_scenario(sc, f.rate_hz)
+            det = calibrated_gust_kalman(sc, lm.continuous(), rate_hz=f.rate_hz, params=design_opts, progress=progress,
+                                         training_logs=training_logs, **cal_opts)
+        except DesignError as exc:
+            raise DesignError(f"{sc.source}: {m.id} cannot be designed at the initial point "
+                              f"(h {sc.model.initial.h_ft:g} ft): {exc}") from None
+        sched = GustKalmanSchedule.single(det.design, det.calibration)
+        note = f"{m.id}: one design at the initial point ({sched.label(0)})"
+    return GustKalmanStream(sched, min_cosine=min_cos, id=m.id), note
+
+
+def _schedule_points(sc: Scenario) -> list[Any]:
+    try:
+        from fdi_sim.sim.designs import schedule_points
+    except ImportError:  # pragma: no cover - until the schedule designs exist
+        return []
+    return list(schedule_points(sc))
+
+
+def _kinematic_stream(sc: Scenario, m: MemberSpec) -> tuple[Any, str]:
+    from fdi_sim.detectors.kinematic_stream import KinematicStream
+    from fdi_sim.sim.detect import DetectorSpec, build_detector
+
+    params = {"turbulence": sc.model.atmosphere.turbulence, "aircraft": sc.aircraft,
+              **{k: v for k, v in m.params.items() if k not in ENTRY_KEYS}}
+    det = build_detector(DetectorSpec(m.id, params), None)
+    return KinematicStream(det), f"{m.id}: {det.design.kind} check ({sc.model.atmosphere.turbulence} turbulence)"
+
+
+# --- thresholds from the training flights ---------------------------------------------------------
+def _cache_path(key: str) -> Path:
+    from fdi_sim.sim.calibrate import cache_dir
+
+    return cache_dir() / f"bank-{key}.json"
+
+
+def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
+    from fdi_sim.sim.calibrate import fault_free
+
+    f = sc.model.fdi
+    ff = json.loads(fault_free(sc, 0, f.calibration_duration_s).to_json())
+    ff.pop("name", None)
+    ff.pop("description", None)
+    ff.pop("fdi", None)
+    h = hashlib.sha256()
+    for mem in bank.members:
+        h.update(mem.id.encode())
+        st = mem.stream
+        if hasattr(st, "_A"):
+            for a in (st._A, st._C, st._L, st._G[:, -1], st.schedule.points):
+                h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+        else:
+            h.update(repr(getattr(st, "design", getattr(st, "det", ""))).encode())
+    blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "n": f.calibration_flights, "T": f.calibration_duration_s,
+                       "decision": [f.persistence_k, f.persistence_n], "version": __version__, "members": h.hexdigest()},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:24]
+
+
+def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Sequence[Any] | None = None,
+                         progress: bool = True, use_cache: bool = True) -> dict[str, Any]:
+    """Set each member's threshold to the ``1 - p`` quantile of its statistic on the fault-free
+    training flights (the same flights the filters were calibrated on), tail-extrapolated.
+
+    Returns the record stored in the cache (thresholds, method, training samples per member).
+    """
+    from fdi_sim.decision.tail import tail_threshold
+    from fdi_sim.sim.calibrate import fly_training, training_seeds
+
+    f = sc.model.fdi
+    key = _thresholds_key(sc, bank, p)
+    path = _cache_path(key)
+    rec = None
+    if use_cache and path.is_file():
+        try:
+            rec = json.loads(path.read_text())
+            if [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
+                rec = None
+        except (ValueError, KeyError, OSError):
+            rec = None
+    if rec is None:
+        logs = training_logs
+        if logs is None:
+            logs = fly_training(sc, training_seeds(f.calibration_flights), f.calibration_duration_s, progress=progress)
+        logs = list(logs)
+        stats: list[list[np.ndarray]] = [[] for _ in bank.members]
+        for lg in logs:
+            _replay_log(bank, lg, raw_thresholds=True)
+            for i, mem in enumerate(bank.members):
+                stats[i].append(mem.trace_statistic())
+        rec = {"p_per_sample": p, "members": []}
+        for mem, s in zip(bank.members, stats):
+            x = np.concatenate(s)
+            x = x[np.isfinite(x)]
+            thr, method = tail_threshold(x, p)
+            rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
+                                   "max_training": float(x.max()) if x.size else None})
+        if use_cache:
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tmp = path.with_suffix(f".tmp{os.getpid()}")
+                tmp.write_text(json.dumps(rec))
+                os.replace(tmp, path)
+            except OSError:
+                pass
+    for mem, r in zip(bank.members, rec["members"]):
+        mem.set_threshold(float(r["threshold"]))
+    bank.calibration = rec
+    bank.reset()
+    return rec
+
+
+def _replay_log(bank: Any, log: Any, *, raw_thresholds: bool = False) -> None:
+    """Run the bank over a log's rows (trace kept per member)."""
+    from fdi_sim.flightlog import TOPIC_COMMANDS, TOPIC_SENSORS, TOPIC_SENSORS_VALID
+
+    cmd = log.topics[TOPIC_COMMANDS]
+    meas = log.topics[TOPIC_SENSORS]
+    K = min(len(cmd.t_s), len(meas.t_s))
+    u = np.column_stack([cmd[nm][:K] for nm in bank.cmd_names])
+    y = np.column_stack([meas[nm][:K] for nm in bank.meas_names])
+    valid = None
+    if TOPIC_SENSORS_VALID in log.topics:
+        vt = log.topics[TOPIC_SENSORS_VALID]
+        valid = np.column_stack([vt[nm][:K] > 0.5 if nm in vt.fields else np.ones(K, bool) for nm in bank.meas_names])
+    bank.reset()
+    bank.keep_trace(True)
+    if raw_thresholds:
+        for mem in bank.members:
+            mem.set_threshold(np.inf)
+    dt = float(np.median(np.diff(np.asarray(meas.t_s[:K]))))
+    bank.replay(u, y, valid, dt, t_rows_s=np.asarray(meas.t_s[:K], dtype=float))
