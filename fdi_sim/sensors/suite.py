@@ -8,10 +8,10 @@ of the simulation rate), held between samples::
 
 with ``Q`` rounding to ``quantum`` (none if 0). Noise is drawn in blocks of one simulated second
 from the suite's own ``numpy.random.Generator``, so a seed gives the same measurements bit for bit.
+The per-step arithmetic is one compiled call (:mod:`fdi_sim.sensors._kernels`, numba).
 """
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -21,8 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.data import aircraft_file  # aircraft/ in a checkout, packaged in a wheel
+from fdi_sim.sensors import _kernels as K
 
-BLOCK_STEPS = 120
+BLOCK_STEPS = 120  # noise rows drawn at a time, one simulated second at 120 Hz
 
 
 @dataclass(frozen=True)
@@ -114,6 +115,14 @@ class SensorSuite:
         Order of the truth vector passed to :meth:`step`.
     dt_s : float
         Simulation step [s].
+
+    Notes
+    -----
+    :meth:`measure_into` (arrays, the loop's fast path), :meth:`step_list` and :meth:`step` run the
+    same compiled function on the same state and can be mixed. Noise: at the first step outside
+    the current block, ``rng.standard_normal((BLOCK_STEPS, n_sensors))`` gives the rows of that
+    step and the next ``BLOCK_STEPS - 1`` (every sensor draws every step, sampling or not), and
+    nothing else draws from ``rng`` after :meth:`reset`'s biases.
     """
 
     def __init__(self, specs: Sequence[SensorSpec], truth_names: Sequence[str], dt_s: float) -> None:
@@ -130,39 +139,57 @@ class SensorSuite:
             if s.rate_hz <= 0 or abs(d - round(d)) > 1e-6 or round(d) < 1:
                 raise ValueError(f"sensor {s.name}: rate {s.rate_hz} Hz does not divide the simulation rate {sim_hz:g} Hz")
             decim.append(int(round(d)))
-        self._period = math.lcm(*decim)
         truth_idx = [list(truth_names).index(n) for n in self.names]
-        # per phase k % period: the sensors that sample, as (sensor, truth index) without quantization
-        # and (sensor, truth index, quantum) with it -- scalar Python per step is cheaper than half a
-        # dozen numpy calls on a 14-element vector
-        self._plan = [
-            ([(i, truth_idx[i]) for i in range(len(specs)) if k % decim[i] == 0 and not specs[i].quantum],
-             [(i, truth_idx[i], specs[i].quantum) for i in range(len(specs)) if k % decim[i] == 0 and specs[i].quantum])
-            for k in range(self._period)
-        ]
+        # header (block start, wanted block, -, dt) and per sensor: truth index, decimation (samples
+        # at steps k % decimation == 0), quantum (0: none), held output
+        self._tab = np.zeros((1 + len(specs), 4))
+        self._tab[0, K.DT_S] = dt_s
+        self._tab[1:, K.TRUTH_INDEX] = truth_idx
+        self._tab[1:, K.DECIMATION] = decim
+        self._tab[1:, K.QUANTUM] = [s.quantum for s in specs]
         self._noise_std = np.array([s.noise_std for s in specs])
+        self._off = np.zeros((BLOCK_STEPS, len(specs)))
+        self._y_list = np.zeros(len(specs))  # step_list's output buffer (returned as a new list)
         self.reset(np.random.default_rng(0))
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Draw the turn-on biases and restart the noise stream from ``rng``."""
         self._rng = rng if rng is not None else np.random.default_rng(0)
         self.bias = np.array([s.bias + s.bias_std * self._rng.standard_normal() for s in self.specs])
-        self._y = [0.0] * len(self.specs)
-        self._block_start = -(10**9)
-        self._offset: list[list[float]] = []
+        self._tab[1:, K.HELD] = 0.0
+        self._tab[0, K.BLOCK_START] = -(10**9)  # no block yet: the first step draws one
 
     def _fill_block(self, k0: int) -> None:
-        # bias + noise for the next block, drawn as one array (sampling instants only use their row)
-        off = self.bias + self._noise_std * self._rng.standard_normal((BLOCK_STEPS, len(self.specs)))
-        self._offset = off.tolist()
-        self._block_start = k0
+        # bias + noise for steps k0 .. k0 + BLOCK_STEPS - 1, drawn as one array (sampling instants
+        # only use their row)
+        self._off = self.bias + self._noise_std * self._rng.standard_normal((BLOCK_STEPS, len(self.specs)))
+        self._tab[0, K.BLOCK_START] = k0
+
+    def measure_into(self, t_s: float, x: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+        """Measure the truth at time ``t_s`` [s] into ``out``, no object created (the loop's fast path).
+
+        Parameters
+        ----------
+        t_s : float
+            Time [s].
+        x : ndarray, float64, shape (n_truth,)
+            The truth vector in ``truth_names`` order (read only).
+        out : ndarray, float64, shape (n_sensors,)
+            Receives the measurements in :attr:`names` order, the floats :meth:`step_list` returns
+            (the caller may change them: the suite holds its own copy).
+        """
+        if K.measure(t_s, x, out, self._tab, self._off):  # True: step outside the noise block, nothing written
+            self._fill_block(int(self._tab[0, K.K_WANTED]))
+            K.measure(t_s, x, out, self._tab, self._off)
 
     def step(self, t_s: float, truth: NDArray[np.float64]) -> Measurement:
         """Measure the truth vector at time ``t_s`` [s]."""
-        return Measurement(t_s, np.array(self.step_list(t_s, truth.tolist())))
+        y = np.empty(len(self.specs))
+        self.measure_into(float(t_s), np.ascontiguousarray(truth, dtype=np.float64), y)
+        return Measurement(t_s, y)
 
     def step_list(self, t_s: float, truth: list[float]) -> list[float]:
-        """:meth:`step` on Python floats (the simulation loop's fast path).
+        """:meth:`measure_into` on Python floats.
 
         Parameters
         ----------
@@ -176,16 +203,6 @@ class SensorSuite:
         list of float
             A new list in :attr:`names` order (the caller may change it).
         """
-        k = int(round(t_s / self.dt_s))
-        j = k - self._block_start
-        if not 0 <= j < BLOCK_STEPS:
-            self._fill_block(k)
-            j = 0
-        off = self._offset[j]
-        y = self._y
-        plain, quantized = self._plan[k % self._period]
-        for i, ti in plain:  # sample, then hold until the next sample
-            y[i] = truth[ti] + off[i]
-        for i, ti, q in quantized:
-            y[i] = round((truth[ti] + off[i]) / q) * q
-        return y[:]
+        y = self._y_list
+        self.measure_into(float(t_s), np.array(truth, dtype=np.float64), y)
+        return y.tolist()
