@@ -285,6 +285,7 @@ ALARM_JSON_SCHEMA: dict[str, Any] = _object_schema(
     statistic={"type": "number", "description": "test statistic at the transition"},
     threshold={"type": "number", "description": "alarm threshold"},
     isolation={"type": ["string", "null"], "description": "isolated hypothesis, if any"},
+    event={"type": "string", "description": "\"isolated\": the alarm's isolation changed (the in-loop bank)"},
 )
 
 #: ``/fdi/failure_log``: time of occurrence, duration and nature of each failure

@@ -81,6 +81,9 @@ class FdiSection(_Section):
     block_s: float = Field(default=0.25, gt=0.0, le=5.0, description="the bank runs every block_s [s]")
     far_per_h: float = Field(default=0.1, gt=0.0, lt=1.0,
                              description="design false-alarm rate of the whole bank [1/flight hour], in (0, 1)")
+    decision: Literal["persistence", "angle-magnitude"] = Field(
+        default="persistence", description="k-of-n on the exceedances, or the patent's two-step rule (magnitude, "
+        "then the angle to a fault direction: only for detectors that give fault directions)")
     persistence_k: int = Field(default=3, ge=1, le=100, description="alarm when k of the last n samples exceed")
     persistence_n: int = Field(default=5, ge=1, le=100)
     arm_s: float = Field(default=5.0, ge=0.0, le=600.0, description="the bank decides from this time on [s]")

@@ -75,14 +75,16 @@ def _gather(meas, valid, cols, excluded, every, row0, n, y, ok, fresh):  # pragm
 
 
 @numba.njit(cache=True, nogil=True)
-def _decide(stat, thr, valid, hyp, k, ring, st, votes, exceed, alarm, iso):  # pragma: no cover - compiled
+def _decide(stat, thr, valid, hyp, k, need_direction, ring, st, votes, exceed, alarm, iso):  # pragma: no cover
     """k-of-n persistence and the isolation vote, carried across blocks.
 
     ``ring`` (n,) last exceedances; ``st`` = [ring position, count, alarm on, leader, leader votes];
-    ``votes`` (H,) votes of the current alarm."""
+    ``votes`` (H,) votes of the current alarm. With ``need_direction`` (the two-step rule) a sample
+    exceeds only if its residual is also within the angle bound of some fault direction
+    (``hyp >= 0``: the detector's cosine test passed)."""
     n = ring.shape[0]
     for j in range(stat.shape[0]):
-        e = valid[j] and stat[j] > thr[j]
+        e = valid[j] and stat[j] > thr[j] and (hyp[j] >= 0 or not need_direction)
         exceed[j] = e
         pos = st[0]
         st[1] += (1 if e else 0) - ring[pos]
@@ -117,13 +119,21 @@ class DecisionConfig:
         k-of-n persistence on the exceedances (1, 1: the exceedance itself).
     confirm_samples : int
         Votes an isolation needs before reconfiguration acts on it [samples].
+    rule : str
+        ``"persistence"``, or ``"angle-magnitude"``: the patent's two-step rule (seed 002): a
+        sample counts only if the statistic exceeds the threshold *and* the residual lies within
+        the angle bound of a fault direction (the detector's signature cosine >= its
+        ``min_cosine``); then k-of-n as above.
     """
 
     k: int = 3
     n: int = 5
     confirm_samples: int = 10
+    rule: str = "persistence"
 
     def __post_init__(self) -> None:
+        if self.rule not in ("persistence", "angle-magnitude"):
+            raise DesignError(f"unknown decision rule {self.rule!r}; persistence or angle-magnitude")
         if not (1 <= self.k <= self.n):
             raise DesignError(f"persistence needs 1 <= k <= n, got k={self.k}, n={self.n}")
         if self.confirm_samples < 1:
@@ -228,11 +238,15 @@ class _Member:
             self.stream.process(t[:S], y, ok, fresh, self.stat[:S], self.valid[:S], self.hyp[:S], self.nu[:S])
         if unarmed:  # before the bank is armed the statistic is logged, never decided on
             self.valid[:unarmed] = False
-        _decide(self.stat[:S], self.thr[:S], self.valid[:S], self.hyp[:S], self.decision.k, self.ring, self.st,
+        _decide(self.stat[:S], self.thr[:S], self.valid[:S], self.hyp[:S], self.decision.k,
+                self.decision.rule == "angle-magnitude", self.ring, self.st,
                 self.votes, self.exceed[:S], self.alarm[:S], self.iso[:S])
         if self.keep:
             for k in TRACE_FIELDS:
                 self.trace[k].append(getattr(self, TRACE_ATTR[k])[:S].copy())
+        else:  # always: the decisions (1 + 8 bytes a sample), for the run summary
+            self.trace["alarm"].append(self.alarm[:S].copy())
+            self.trace["isolation"].append(self.iso[:S].copy())
 
 
 @dataclass
@@ -297,6 +311,13 @@ class FdiBank:
         self.cmd_names, self.meas_names = tuple(cmd_names), tuple(meas_names)
         every = {nm: int(round(sim_rate_hz / r)) for nm, r in sensor_rates_hz.items() if r}
         self.decision = decision
+        if decision.rule == "angle-magnitude":
+            no_dir = [kind for kind, _ in streams if kind != "gust"]
+            if no_dir:
+                bad = [getattr(st, "id", "?") for kind, st in streams if kind != "gust"]
+                raise DesignError(f"the angle-magnitude rule needs fault directions (C D_f), which {', '.join(bad)} "
+                                  "do not give (a kinematic check has a residual per sensor, no direction); use "
+                                  "decision = \"persistence\" or a bank of kalman-gust-v1 only")
         self.members = [_Member(s, kind, self.meas_names, self.cmd_names, every, self.S, decision) for kind, s in streams]
         ids = [m.id for m in self.members]
         if len(set(ids)) != len(ids):
@@ -323,6 +344,7 @@ class FdiBank:
         for m in self.members:
             m.reset()
         self.samples_done = 0
+        self._t_trace: list[NDArray[np.float64]] = []
         self.valid_rows[:] = True
         self.failure_log = FailureLogger(self.hypotheses)
         self._sig = np.zeros(len(self.hypotheses), dtype=np.bool_)
@@ -344,6 +366,16 @@ class FdiBank:
     def trace(self) -> dict[str, dict[str, NDArray]]:
         """Per member id, the kept arrays (:data:`TRACE_FIELDS`) over all samples since reset."""
         return {m.id: {k: (np.concatenate(v) if v else np.zeros(0)) for k, v in m.trace.items()} for m in self.members}
+
+    def decisions(self) -> tuple[NDArray[np.float64], dict[str, tuple[NDArray[np.bool_], tuple[str | None, ...]]]]:
+        """Sample times [s] and, per member id, the alarm and the isolated hypothesis of every sample."""
+        t = np.concatenate(self._t_trace) if self._t_trace else np.zeros(0)
+        out = {}
+        for m in self.members:
+            a = np.concatenate(m.trace["alarm"]) if m.trace["alarm"] else np.zeros(0, dtype=bool)
+            i = np.concatenate(m.trace["isolation"]) if m.trace["isolation"] else np.zeros(0, dtype=np.int64)
+            out[m.id] = (a, tuple(m.hypotheses[k] if on and k >= 0 else None for k, on in zip(i, a)))
+        return t, out
 
     def start_at(self, h_ft: float, vc_kts: float) -> None:
         """Start the scheduled members at the point nearest the flight's start."""
@@ -384,6 +416,7 @@ class FdiBank:
         j0 = self.samples_done
         for i in range(S):
             self._t[i] = (j0 + 1 + i) * self.n * dt_s
+        self._t_trace.append(self._t.copy())
         return self._run(self._u_avg, self.meas_rows, self.valid_rows, self._t, S)
 
     def flush(self, k_last: int, dt_s: float) -> None:
@@ -395,6 +428,7 @@ class FdiBank:
         average_commands(self.cmd_rows[: S * self.n], self.n, self._u_avg[:S])
         for i in range(S):
             self._t[i] = (self.samples_done + 1 + i) * self.n * dt_s
+        self._t_trace.append(self._t[:S].copy())
         self._run(self._u_avg[:S], self.meas_rows[:S], self.valid_rows[:S], self._t[:S], S)
 
     def pilot_input(self, y: list[float]) -> list[float]:
@@ -418,6 +452,7 @@ class FdiBank:
         m_s = np.ascontiguousarray(meas[rows], dtype=np.float64)
         v_s = np.ones_like(m_s, dtype=np.bool_) if valid is None else np.ascontiguousarray(valid[rows], dtype=np.bool_)
         t = rows * dt_s if t_rows_s is None else np.asarray(t_rows_s, dtype=float)[rows]
+        self._t_trace.append(np.asarray(t, dtype=float).copy())
         for j0 in range(0, J, S):
             b = min(S, J - j0)
             self._run(u_avg[j0:j0 + b], m_s[j0:j0 + b], v_s[j0:j0 + b], t[j0:j0 + b], b)
@@ -609,40 +644,33 @@ class FaultDetection:
     isolation_correct: bool | None
 
 
-def fdi_outcomes(alarms: Sequence[BankAlarm], faults: Sequence[Mapping[str, Any]], detectors: Sequence[str],
-                 t_end_s: float) -> tuple[tuple[FaultDetection, ...], tuple[BankAlarm, ...]]:
-    """Per injected fault and detector: the first alarm from its onset, the delay and the isolation;
-    and the false alarms (an alarm that begins outside every fault window and its
-    :data:`LATE_GRACE_S`).
+def fdi_outcomes(bank: FdiBank, faults: Sequence[Mapping[str, Any]], t_end_s: float
+                 ) -> tuple[tuple[FaultDetection, ...], tuple[BankAlarm, ...]]:
+    """Per injected fault and member: the first alarm from the fault's onset, the delay and the
+    isolation (:func:`fdi_sim.sim.detect.fault_outcome`, the rule ``fdi-sim detect`` reports
+    with); and the false alarms: alarm episodes that begin outside every fault window and its
+    :data:`LATE_GRACE_S`.
 
     Parameters
     ----------
-    alarms : sequence of BankAlarm
-        The bank's alarm episodes.
+    bank : FdiBank
+        After the flight.
     faults : sequence of mapping
         ``label``, ``target``, ``windows_s`` per fault (the injector's catalog).
-    detectors : sequence of str
-        The bank's member ids.
     t_end_s : float
         End of the flight [s] (an open window ends there).
     """
-    from fdi_sim.sim.detect import _matches
+    from fdi_sim.sim.detect import fault_outcome
 
+    t, dec = bank.decisions()
     out = []
-    windows = []
+    windows = [(float(a), min(float(b), t_end_s)) for f in faults for a, b in f.get("windows_s", [])]
     for f in faults:
-        ws = [(float(a), min(float(b), t_end_s)) for a, b in f.get("windows_s", [])]
-        windows += ws
-        if not ws:
+        if not f.get("windows_s"):
             continue
-        t_on = ws[0][0]
-        for d in detectors:
-            eps = [a for a in alarms if a.detector == d and t_on <= a.onset_t_s <= ws[-1][1] + LATE_GRACE_S]
-            if eps:
-                a = eps[0]
-                out.append(FaultDetection(f["label"], f.get("target", ""), d, t_on, a.onset_t_s, a.onset_t_s - t_on,
-                                          a.isolation, _matches(a.isolation, f.get("target", ""))))
-            else:
-                out.append(FaultDetection(f["label"], f.get("target", ""), d, t_on, None, None, None, None))
-    false = tuple(a for a in alarms if not any(w0 <= a.onset_t_s <= w1 + LATE_GRACE_S for w0, w1 in windows))
+        for mid, (a, iso) in dec.items():
+            o = fault_outcome(f, t, a, iso)
+            out.append(FaultDetection(f["label"], f.get("target", ""), mid, o.t_onset_s, o.first_alarm_s, o.delay_s,
+                                      o.isolated_as, o.isolation_correct))
+    false = tuple(e for e in bank.alarms if not any(w0 <= e.onset_t_s <= w1 + LATE_GRACE_S for w0, w1 in windows))
     return tuple(out), false

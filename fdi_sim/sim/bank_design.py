@@ -104,6 +104,12 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
     if not members:
         return None
     f = sc.model.fdi
+    if f.decision == "angle-magnitude":
+        bad = [m.id for m in members if IN_LOOP[m.id] != "gust"]
+        if bad:
+            raise ScenarioError(sc.source, "fdi.decision", f"angle-magnitude needs fault directions (C D_f), which "
+                                f"{', '.join(bad)} do not give", 'use decision = "persistence", or a bank of '
+                                "kalman-gust-v1 only ([[detectors]] without bank = \"default\")")
     # the training flights are flown at most once, and only if some calibration is not cached
     logs = training_logs if training_logs is not None else LazyTraining(sc, progress)
     streams, notes = [], []
@@ -116,7 +122,7 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
         streams.append((kind, stream))
         notes.append(note)
     S = int(round(f.block_s * f.rate_hz))
-    decision = DecisionConfig(f.persistence_k, f.persistence_n, max(1, int(round(f.confirm_s * f.rate_hz))))
+    decision = DecisionConfig(f.persistence_k, f.persistence_n, max(1, int(round(f.confirm_s * f.rate_hz))), f.decision)
     bank = FdiBank(streams, cmd_names=cmd_names, meas_names=meas_names, sensor_rates_hz=sensor_rates_hz,
                    sim_rate_hz=float(sc.model.rate_hz), rate_hz=f.rate_hz, block_samples=S, decision=decision,
                    reconfigure=f.reconfigure, pilot_sensors=pilot_sensors, notes=tuple(notes), arm_s=f.arm_s)
@@ -153,7 +159,11 @@ def _gust_stream(sc: Scenario, m: MemberSpec, *, progress: bool, training_logs: 
     from fdi_sim.sim.detect import CALIBRATION_OPTIONS, model_for_scenario
 
     f = sc.model.fdi
-    cal_opts = {"n_flights": f.calibration_flights, "duration_s": f.calibration_duration_s}
+    # the bank sets the threshold itself (calibrate_thresholds); of the filter's own calibration it
+    # uses Sigma_m only, so its quantile target just has to be one the flights can give
+    n_samples = f.calibration_flights * max(1.0, f.calibration_duration_s - 5.0) * f.rate_hz
+    cal_opts = {"n_flights": f.calibration_flights, "duration_s": f.calibration_duration_s,
+                "target": max(1e-4, 20.0 / n_samples)}
     cal_opts.update({k: v for k, v in m.params.items() if k in CALIBRATION_OPTIONS})
     design_opts = {k: v for k, v in m.params.items() if k not in CALIBRATION_OPTIONS + ("rate_hz", "min_cosine")}
     min_cos = float(m.params.get("min_cosine", 0.7))
@@ -298,3 +308,50 @@ def _replay_log(bank: Any, log: Any, *, raw_thresholds: bool = False) -> None:
             mem.set_threshold(np.inf)
     dt = float(np.median(np.diff(np.asarray(meas.t_s[:K]))))
     bank.replay(u, y, valid, dt, t_rows_s=np.asarray(meas.t_s[:K], dtype=float))
+
+
+def bank_for_log(log: Any, *, progress: bool = False) -> Any:
+    """The bank a log's scenario flew with, rebuilt (designs and thresholds from the cache, or
+    computed the same way), with the log's measurement and command columns.
+
+    Raises
+    ------
+    LogError
+        The log has no scenario metadata, or its scenario has no bank.
+    """
+    from fdi_sim.errors import LogError
+    from fdi_sim.flightlog import METADATA_SCENARIO, TOPIC_COMMANDS, TOPIC_SENSORS
+    from fdi_sim.scenario.loader import from_dict
+    from fdi_sim.sensors import load_suite
+
+    meta = log.metadata.get(METADATA_SCENARIO)
+    if not meta or "json" not in meta:
+        raise LogError(str(log.path), "no 'scenario' metadata record: not a log written by `fdi-sim run`")
+    sc = from_dict(json.loads(meta["json"]), source=f"{log.path} (scenario metadata)")
+    if not bank_members(sc):
+        raise LogError(str(log.path), "its scenario has no FDI bank ([fdi] bank or [[detectors]]); give --detector "
+                       "or --bank default instead")
+    for topic in (TOPIC_COMMANDS, TOPIC_SENSORS):
+        if topic not in log.topics:
+            raise LogError(str(log.path), f"no {topic} topic (a run logged with [log] per_step = false cannot be "
+                           "replayed: its FDI topics are the record)")
+    meas_names = tuple(f for f in log.topics[TOPIC_SENSORS].fields if f != "t_s")
+    cmd_names = tuple(f for f in log.topics[TOPIC_COMMANDS].fields if f != "t_s")
+    suite = load_suite(sc.aircraft, sc.model.sensors.suite)
+    return build_bank(sc, meas_names=meas_names, cmd_names=cmd_names,
+                      sensor_rates_hz={s.name: s.rate_hz for s in suite}, pilot_sensors=meas_names, progress=progress)
+
+
+def replay_log(log: Any, bank: Any | None = None) -> dict[str, dict[str, np.ndarray]]:
+    """Replay a log through its scenario's bank: per member id, the per-sample arrays
+    (:data:`fdi_sim.sim.bank.TRACE_FIELDS` and ``t_s``). For a log flown with the bank these equal
+    its ``/fdi/<id>/statistic`` topics bit for bit (the kernels do not depend on the blocking)."""
+    bank = bank if bank is not None else bank_for_log(log)
+    _replay_log(bank, log)
+    out = bank.trace()
+    n = bank.n
+    t_rows = np.asarray(log.topics["/sensors/measurements"].t_s, dtype=float)
+    t = t_rows[n * np.arange(1, bank.samples_done + 1)]
+    for v in out.values():
+        v["t_s"] = t
+    return out

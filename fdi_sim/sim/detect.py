@@ -42,12 +42,17 @@ BANKS: dict[str, tuple[str, ...]] = {
 }
 
 
+#: ``--bank scenario``: replay the bank the log's own scenario defines (the in-loop bank)
+SCENARIO_BANK = "scenario"
+
+
 def bank_specs(name: str) -> list[DetectorSpec]:
     """The detectors of a named bank."""
     if name not in BANKS:
         close = difflib.get_close_matches(name, list(BANKS), n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise ScenarioError("--bank", name, f"unknown bank {name!r}{hint}", f"one of {', '.join(BANKS)}")
+        raise ScenarioError("--bank", name, f"unknown bank {name!r}{hint}", f"one of {', '.join(BANKS)}, "
+                            f"{SCENARIO_BANK} (the log's own in-loop bank)")
     return [DetectorSpec(i) for i in BANKS[name]]
 
 
@@ -453,3 +458,34 @@ def _write(log: FlightLog, out: Path, traces: Sequence[DetectorTrace], rate_hz: 
     meta = {"detect": {"rate_hz": f"{rate_hz:g}", "detectors": json.dumps([t.id for t in traces]),
                        "source": str(log.path)}}
     return write_extended(log, out, vectors, events, meta)
+
+
+def replay_bank(path: str | Path) -> tuple[DetectReport, dict[str, Any]]:
+    """``fdi-sim detect LOG --bank scenario``: the log's in-loop bank replayed over its rows.
+
+    Returns the report and, per member, whether the replay equals the log's
+    ``/fdi/<id>/statistic`` topic bit for bit (statistic, threshold, decision, isolation, point,
+    time) where the log has it.
+    """
+    from fdi_sim.sim.bank_design import bank_for_log, replay_log
+
+    log = read_log(path)
+    bank = bank_for_log(log)
+    t0 = time.perf_counter()
+    traces = replay_log(log, bank)
+    cost = (time.perf_counter() - t0) / max(1, bank.samples_done * len(bank.members)) * 1e6
+    faults = fault_windows(log)
+    outcomes, same = [], {}
+    for m in bank.members:
+        v = traces[m.id]
+        iso = tuple(m.hypotheses[i] if a and i >= 0 else None for i, a in zip(v["isolation"], v["alarm"]))
+        tr = DetectorTrace(m.id, v["t_s"], v["statistic"], v["threshold"], v["alarm"].astype(bool),
+                           v["valid"].astype(bool), iso, cost)
+        outcomes.append(outcome(tr, DetectorSpec(m.id), faults, bank.rate_hz))
+        topic = fdi_topic(m.id, "statistic")
+        if topic in log.topics:
+            tp = log.topics[topic]
+            same[m.id] = all(np.array_equal(np.asarray(tp[k], dtype=float), np.asarray(v[k], dtype=float), equal_nan=True)
+                             for k in ("t_s", "statistic", "threshold", "exceedance", "alarm", "valid", "isolation", "point"))
+    return DetectReport(str(path), bank.meas_names and log.metadata.get(METADATA_SCENARIO, {}).get("aircraft", "?"),
+                        bank.rate_hz, tuple(outcomes)), same

@@ -429,7 +429,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     fdi: dict = {}
     if bank is not None:
         faults = injector.catalog() if injector is not None else []
-        det, false = fdi_outcomes(bank.alarms, faults, [m.id for m in bank.members], t_end_s)
+        det, false = fdi_outcomes(bank, faults, t_end_s)
         fdi = dict(fdi_detectors=tuple(m.id for m in bank.members), fdi_detections=det, fdi_false_alarms=false,
                    fdi_reconfigurations=tuple(bank.reconfig_events), fdi_notes=bank.notes)
     summary = RunSummary(

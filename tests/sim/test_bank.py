@@ -1,0 +1,155 @@
+"""The FDI bank in the loop (issue 13) on real JSBSim flights: detection, isolation, the log,
+in-loop against replay, reconfiguration, bad input."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from fdi_sim.cli import main
+from fdi_sim.errors import ScenarioError
+from fdi_sim.flightlog import read_log
+from fdi_sim.scenario import load, loads
+from fdi_sim.scenario.loader import from_dict
+from fdi_sim.sim import run
+from fdi_sim.sim.bank_design import replay_log
+from fdi_sim.sim.detect import replay_bank
+
+ROOT = Path(__file__).resolve().parents[2]
+#: short calibrations keep the suite fast (the shipped default is 24 x 300 s)
+QUICK = {"calibration_flights": 6, "calibration_duration_s": 60.0}
+
+
+def _with_bank(path: str, **fdi) -> object:
+    sc = load(ROOT / "scenarios" / path)
+    d = json.loads(sc.to_json())
+    d["fdi"] = {"bank": "default", **QUICK, **fdi}
+    return from_dict(d, source=str(ROOT / "scenarios" / path))
+
+
+@pytest.fixture(scope="module")
+def gyro_run(tmp_path_factory):
+    sc = _with_bank("f16_pitch_gyro_bias.toml", reconfigure=False)
+    return run(sc, tmp_path_factory.mktemp("bank"), progress=False)
+
+
+def test_gyro_bias_is_detected_isolated_and_logged(gyro_run):
+    s = gyro_run.summary
+    assert gyro_run.status == "completed"
+    assert s.fdi_detectors == ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1",
+                               "kinematic-airspeed-v1")
+    found = {d.detector: d for d in s.fdi_detections}
+    att = found["kinematic-attitude-v1"]
+    assert att.detected_t_s is not None and 0.0 < att.delay_s < 3.0 and att.isolation == "q_radps"
+    assert att.isolation_correct
+    assert not s.fdi_false_alarms  # nothing before the onset, nothing outside the fault
+    text = s.format()
+    assert "kinematic-attitude-v1" in text and "delay" in text and "false alarms: none" in text
+    log = read_log(gyro_run.log_path)
+    for mid in s.fdi_detectors:
+        st = log.topics[f"/fdi/{mid}/statistic"]
+        assert len(st.t_s) == 1200 and np.all(np.diff(st.t_s) > 0)  # 60 s at 20 Hz, samples 1 .. 1200
+        assert f"/fdi/{mid}/residual" in log.topics
+    alarms = log.topics["/fdi/alarms"].events
+    assert alarms and all(e.t_s >= 10.0 for e in alarms)  # the fault starts at 10 s
+    flog = log.topics["/fdi/failure_log"].events
+    onsets = [e.payload for e in flog if e.payload["event"] == "onset"]
+    assert any(p["hypothesis"] == "q_radps" and p["onset_t_s"] >= 10.0 for p in onsets)
+    meta = json.loads(log.metadata["fdi"]["calibration"])
+    assert all(m["threshold"] > 0 for m in meta["members"])
+    # every message decodes with the mcap reader, CRCs checked
+    with open(gyro_run.log_path, "rb") as f:
+        n = sum(1 for _ in make_reader(f, validate_crcs=True).iter_messages())
+    assert n == sum(log.message_counts.values())
+
+
+def test_replay_of_the_in_loop_bank_is_bit_identical(gyro_run):
+    log = read_log(gyro_run.log_path)
+    traces = replay_log(log)
+    for mid, v in traces.items():
+        tp = log.topics[f"/fdi/{mid}/statistic"]
+        for k in ("t_s", "statistic", "threshold", "exceedance", "alarm", "valid", "isolation", "point"):
+            assert np.array_equal(np.asarray(tp[k], float), np.asarray(v[k], float), equal_nan=True), (mid, k)
+    rep, same = replay_bank(gyro_run.log_path)
+    assert same and all(same.values())
+    # the offline report and the in-loop summary give the same detection and isolation
+    loop = {(d.detector, d.detected_t_s, d.isolation) for d in gyro_run.summary.fdi_detections}
+    offline = {(o.id, f.first_alarm_s, f.isolated_as) for o in rep.detectors for f in o.faults}
+    assert loop == offline
+
+
+def test_cli_detect_replay_exit_code(gyro_run, capsys):
+    assert main(["detect", str(gyro_run.log_path), "--bank", "scenario"]) == 0
+    assert "identical to the log's /fdi/kalman-gust-v1/statistic" in capsys.readouterr().out
+
+
+def test_monte_carlo_log_holds_only_the_fdi_topics(tmp_path):
+    sc = _with_bank("f16_pitch_gyro_bias.toml", reconfigure=False)
+    d = json.loads(sc.to_json())
+    d["log"] = {"per_step": False}
+    res = run(from_dict(d, source="mc"), tmp_path, progress=False)
+    log = read_log(res.log_path)
+    assert res.summary.steps == 7201
+    assert not any(t.startswith(("/truth", "/sensors", "/commands", "/surfaces")) for t in log.topics)
+    assert "/fdi/kinematic-attitude-v1/statistic" in log.topics and "/sim/status" in log.topics
+    assert res.summary.fdi_detections == pytest.approx(res.summary.fdi_detections)  # same flight, same bank
+    full = _with_bank("f16_pitch_gyro_bias.toml", reconfigure=False)
+    res_full = run(full, tmp_path / "full", progress=False)
+    a, b = read_log(res.log_path), read_log(res_full.log_path)
+    for mid in res.summary.fdi_detectors:  # the log level does not change what the bank computes
+        t = f"/fdi/{mid}/statistic"
+        assert np.array_equal(a.topics[t]["statistic"], b.topics[t]["statistic"], equal_nan=True)
+
+
+def _after(log, t0_s: float) -> tuple[float, float]:
+    """Largest |dh| [ft] and |dVc| [kt] (gust removed, as the run summary) from ``t0_s`` on."""
+    tr, cmd = log.topics["/truth/state"], log.topics["/commands/pilot"]
+    m = tr.t_s >= t0_s
+    v_air = np.sqrt(tr["v_north_fps"] ** 2 + tr["v_east_fps"] ** 2 + tr["v_down_fps"] ** 2)  # no steady wind here
+    dv = np.abs(tr["vc_kts"] * v_air / tr["vt_fps"] - cmd["vc_ref_kts"])
+    return float(np.max(np.abs(tr["h_ft"] - cmd["h_ref_ft"])[m])), float(np.max(dv[m]))
+
+
+def test_reconfiguration_holds_the_airspeed_after_isolation(tmp_path):
+    """DHC-6 pitot drift of 0.1 kt/s: with reconfiguration the bank corrects vc_kts for the pilot
+    once it is isolated, and the airspeed and altitude stay within the autopilot bars (100 ft,
+    5 kt) from 30 s after it; without, the airspeed leaves them."""
+    runs = {}
+    for rc in (True, False):
+        sc = _with_bank("dhc6_airspeed_drift.toml", reconfigure=rc)
+        sc = sc.replace(duration_s=300.0)
+        runs[rc] = run(sc, tmp_path / str(rc), progress=False)
+    on = runs[True].summary
+    assert [r["sensor"] for r in on.fdi_reconfigurations] == ["vc_kts"]
+    t_rc = on.fdi_reconfigurations[0]["t_s"]
+    assert not runs[False].summary.fdi_reconfigurations
+    dh_on, dv_on = _after(read_log(runs[True].log_path), t_rc + 30.0)
+    dh_off, dv_off = _after(read_log(runs[False].log_path), t_rc + 30.0)
+    assert dh_on < 100.0 and dv_on < 5.0, (dh_on, dv_on)
+    assert dv_off > 5.0, dv_off
+    log = read_log(runs[True].log_path)
+    ev = [e.payload for e in log.topics["/fdi/reconfiguration"].events]
+    assert ev[0]["sensor"] == "vc_kts" and "kinematic-airspeed-v1" in ev[0]["confirmed_by"]
+
+
+@pytest.mark.parametrize("fdi, key, words", [
+    ('far_per_h = 1.5', "fdi.far_per_h", "less than 1"),
+    ('far_per_s = 1e-4', "fdi.far_per_s", "did you mean 'far_per_h'"),
+    ('rate_hz = 7.0', "fdi.rate_hz", "does not divide"),
+    ('block_s = 0.12', "fdi.block_s", "whole number"),
+    ('persistence_k = 6', "fdi", "exceeds persistence_n"),
+])
+def test_bad_fdi_sections(f16_text, fdi, key, words):
+    with pytest.raises(ScenarioError) as e:
+        loads(f16_text + f'[fdi]\nbank = "default"\n{fdi}\n')
+    assert key in str(e.value) and words in str(e.value)
+
+
+def test_a_decision_rule_that_needs_fault_directions(tmp_path, f16_text):
+    sc = loads(f16_text + '[fdi]\nbank = "default"\ndecision = "angle-magnitude"\n')
+    with pytest.raises(ScenarioError, match="fault directions"):
+        run(sc, tmp_path, progress=False)
+    assert not list(tmp_path.glob("*.mcap"))
