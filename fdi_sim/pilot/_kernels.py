@@ -1,20 +1,21 @@
 """The pilot's per-step arithmetic, compiled: maneuver tables and the autopilot laws in one call.
 
 :class:`fdi_sim.pilot.autopilot.Pilot` packs everything it reads per step into one float64 array
-``par`` (gains, trim, modes, measurement indexes, maneuver tables; layout below, built by
-:func:`pack_params`) and keeps its filter states in another, ``state`` (:func:`initial_state`).
-:func:`step` then costs one compiled call with four array arguments: about 0.3 us of numba
-dispatch for about 0.1 us of arithmetic, against about 4 us for the same laws in Python floats.
+``par`` (gains, trim, modes, measurement indexes, maneuver tables; layout in the ``P_*``
+constants, built by :func:`pack_params`) and keeps its filter states in another, ``state``
+(``S_*``; initial values set by ``Pilot.reset``). :func:`step` is then one compiled call with four
+array arguments, about 0.45 us from Python, most of it numba's dispatch (the arithmetic is about
+0.1 us), against about 4 us for the same laws in Python floats.
 
 Bit identity. Every expression is the Python implementation's (commit d97be8c, kept as the oracle
 ``tests/pilot/_reference_pilot.py``) with its operations in the same order: IEEE ``+ - * /`` and
 ``sqrt`` round the same in both; ``math.sin``/``math.cos`` call the same libm (the tests check it on
 real flights); no ``fastmath`` (it would allow reassociation and fused multiply-adds). Python's
 ``min``/``max``, ``np.sign`` and ``np.minimum``/``np.maximum`` are written out with their exact
-semantics (signed zeros and NaN included); numba's float ``%`` is Python's. The maneuver table rows that the Python
-pilot evaluated with numpy a block of 120 steps at a time are evaluated here for the one step
-needed, with the same scalar operations, so the row of step ``k`` is the same float whatever the
-block it fell in.
+semantics (signed zeros and NaN included); numba's float ``%`` is Python's. The maneuver table
+rows that the Python pilot evaluated with numpy a block of 120 steps at a time are evaluated here
+for the one step needed, with the same scalar operations, so the row of step ``k`` is the same
+float whatever the block it fell in.
 """
 from __future__ import annotations
 

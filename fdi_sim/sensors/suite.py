@@ -161,8 +161,11 @@ class SensorSuite:
 
     def _fill_block(self, k0: int) -> None:
         # bias + noise for steps k0 .. k0 + BLOCK_STEPS - 1, drawn as one array (sampling instants
-        # only use their row)
-        self._off = self.bias + self._noise_std * self._rng.standard_normal((BLOCK_STEPS, len(self.specs)))
+        # only use their row): off = bias + std * z, in place (z std is std z bit for bit)
+        off = self._off
+        self._rng.standard_normal(out=off)
+        np.multiply(off, self._noise_std, out=off)
+        np.add(off, self.bias, out=off)
         self._tab[0, K.BLOCK_START] = k0
 
     def measure_into(self, t_s: float, x: NDArray[np.float64], out: NDArray[np.float64]) -> None:
