@@ -25,3 +25,18 @@ def test_binomial_upper_is_the_975_quantile() -> None:
     u = binomial_upper(48000, 1e-4)
     assert u == 10
     assert stats.binom.cdf(u, 48000, 1e-4) >= 0.975 > stats.binom.cdf(u - 1, 48000, 1e-4)
+
+
+def test_poisson_rate_interval_covers_at_its_level():
+    """Garwood's interval against simulated Poisson counts: coverage >= 95 % (exact intervals are
+    conservative), and the textbook k = 0 upper bound 3.689 / T (95 %)."""
+    import numpy as np
+
+    from fdi_sim.decision.intervals import poisson_rate_interval
+
+    assert poisson_rate_interval(0, 2.0) == (0.0, pytest.approx(3.6889 / 2.0, rel=1e-4))
+    rng = np.random.default_rng(5)
+    for rate in (0.3, 4.0):
+        ks = rng.poisson(rate * 10.0, size=4000)
+        cover = np.mean([lo <= rate <= hi for lo, hi in (poisson_rate_interval(int(k), 10.0) for k in ks)])
+        assert 0.95 <= cover < 0.995

@@ -1,0 +1,93 @@
+"""Benchmark (on demand: `python tests/benchmarks/bench_bank.py`): the loop with the default FDI bank.
+
+Issue 13's goal: the full loop with the default bank at >= 0.4 of bare JSBSim's step rate on both
+aircraft, measured in the same process, with the log as `fdi-sim run` writes it (every 120 Hz
+topic) and as a Monte Carlo run writes it (``[log] per_step = false``: FDI topics only). Bare
+JSBSim here is what bench_loop.py measures: one command write and one ``run()`` per step, trimmed,
+moderate turbulence. The bank's designs and thresholds come from the cache (the first run
+calibrates). Then a profile of one full-log run: where the wall time of the loop goes. Never a
+timed assertion in the suite.
+"""
+from __future__ import annotations
+
+import cProfile
+import io
+import pstats
+import sys
+import tempfile
+import time
+
+from fdi_sim.aircraft import Aircraft, Atmosphere, trim
+from fdi_sim.scenario import loads
+from fdi_sim.sim import run
+
+SC = """
+name = "bench_bank_{ac}"
+aircraft = "{ac}"
+duration_s = {T}
+seed = 1
+[initial]
+h_ft = {h}
+{speed}
+[atmosphere]
+turbulence = "moderate"
+[fdi]
+bank = "{bank}"
+[log]
+per_step = {per_step}
+"""
+CASES = {"f16": (10000.0, "vt_kts = 400.0"), "DHC6": (5000.0, "vc_kts = 120.0")}
+
+
+def bare_rate(ac_name: str, sc, T: float) -> float:
+    ac = Aircraft(ac_name, sc.dt_s)
+    trim(ac, sc.operating_point())
+    ac.set_atmosphere(Atmosphere("moderate"), 1)
+    write = ac.command_writer()
+    n = int(T / sc.dt_s)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        write(0.0, 0.0, 0.0, 0.3)
+        ac.step()
+    return n / (time.perf_counter() - t0)
+
+
+def scenario(ac: str, T: float, bank: str, per_step: bool):
+    h, speed = CASES[ac]
+    return loads(SC.format(ac=ac, T=T, h=h, speed=speed, bank=bank, per_step=str(per_step).lower()))
+
+
+def loop_rate(sc, d: str) -> float:
+    res = run(sc, d, progress=False, force=True)
+    return res.summary.steps / res.summary.wall_s
+
+
+def main(T: float = 120.0, repeats: int = 3) -> None:
+    print(f"{'aircraft':8} {'log':10} {'bank':8} {'bare steps/s':>13} {'loop steps/s':>13} {'ratio':>6} "
+          f"{'overhead us/step':>17}")
+    with tempfile.TemporaryDirectory() as d:
+        for ac in CASES:
+            for bank, per_step in (("none", True), ("default", True), ("none", False), ("default", False)):
+                sc = scenario(ac, T, bank, per_step)
+                run(scenario(ac, 2.0, bank, per_step), d, progress=False, force=True)  # designs, numba compile
+                bare, loop = [], []
+                for _ in range(repeats):  # interleaved so that machine load hits both alike
+                    bare.append(bare_rate(ac, sc, T))
+                    loop.append(loop_rate(sc, d))
+                b, lp = max(bare), max(loop)
+                print(f"{ac:8} {'full' if per_step else 'fdi only':10} {bank:8} {b:13.0f} {lp:13.0f} {lp / b:6.2f} "
+                      f"{1e6 / lp - 1e6 / b:17.1f}", flush=True)
+        for ac in CASES:
+            sc = scenario(ac, T, "default", True)
+            prof = cProfile.Profile()
+            prof.enable()
+            run(sc, d, progress=False, force=True)
+            prof.disable()
+            s = io.StringIO()
+            pstats.Stats(prof, stream=s).sort_stats("tottime").print_stats(14)
+            print(f"\n--- profile, {ac}, default bank, full log ({T:g} s): functions by own time ---")
+            print("\n".join(line for line in s.getvalue().splitlines()[6:] if line.strip()))
+
+
+if __name__ == "__main__":
+    main(float(sys.argv[1]) if len(sys.argv) > 1 else 120.0)
