@@ -13,7 +13,8 @@ kinematic checks from their catalogue. Thresholds: the bank's design false-alarm
 an alarm onset needs an exceedance), ``p = far_per_h / (detectors x rate_hz x 3600)`` per
 sample, and each detector's threshold is the ``1 - p`` quantile of its statistic on the training
 flights, extrapolated by a generalized Pareto tail where the flights hold fewer than ten
-exceedances of it (:func:`fdi_sim.decision.tail.tail_threshold`).
+exceedances of it (:func:`fdi_sim.decision.tail.tail_threshold`), taken at its 95 % bootstrap bound
+over the training flights (:func:`fdi_sim.decision.tail.confident_tail_threshold`).
 """
 from __future__ import annotations
 
@@ -46,6 +47,8 @@ IN_LOOP: dict[str, str] = {
     "kinematic-airspeed-v1": "kinematic",
     "kinematic-flow-angles-v1": "kinematic",
 }
+#: thresholds meet the per-sample target with this confidence (flight-level bootstrap)
+THRESHOLD_CONFIDENCE = 0.95
 #: keys of a [[detectors]] entry that are not design options
 ENTRY_KEYS = ("type", "n_flights", "duration_s", "target")
 
@@ -229,7 +232,7 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
                 h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
         else:
             h.update(repr(getattr(st, "design", getattr(st, "det", ""))).encode())
-    blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "n": f.calibration_flights, "T": f.calibration_duration_s,
+    blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "confidence": THRESHOLD_CONFIDENCE, "n": f.calibration_flights, "T": f.calibration_duration_s,
                        "decision": [f.persistence_k, f.persistence_n], "version": __version__, "members": h.hexdigest()},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
@@ -242,7 +245,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
 
     Returns the record stored in the cache (thresholds, method, training samples per member).
     """
-    from fdi_sim.decision.tail import tail_threshold
+    from fdi_sim.decision.tail import confident_tail_threshold
     from fdi_sim.sim.calibrate import fly_training, training_seeds
 
     f = sc.model.fdi
@@ -266,11 +269,12 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
             _replay_log(bank, lg, raw_thresholds=True)
             for i, mem in enumerate(bank.members):
                 stats[i].append(mem.trace_statistic())
-        rec = {"p_per_sample": p, "members": []}
+        rec = {"p_per_sample": p, "confidence": THRESHOLD_CONFIDENCE, "members": []}
+        rng = np.random.default_rng(0)  # the bootstrap's resampling: fixed, so a calibration is reproducible
         for mem, s in zip(bank.members, stats):
+            s = [x[np.isfinite(x)] for x in s]
             x = np.concatenate(s)
-            x = x[np.isfinite(x)]
-            thr, method = tail_threshold(x, p)
+            thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
             rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
                                    "max_training": float(x.max()) if x.size else None})
         if use_cache:
