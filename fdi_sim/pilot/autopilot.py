@@ -64,9 +64,9 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+import fdi_sim.pilot._kernels as K  # the module, not its package (no import cycle through __init__)
 from fdi_sim.data import aircraft_file  # aircraft/ in a checkout, packaged in a wheel
 from fdi_sim.isa import vt_from_vc
-from fdi_sim.pilot import _kernels as K
 from fdi_sim.pilot.maneuvers import AXES, HeadingChange, PulseTrain, RefRamp, Turn
 from fdi_sim.units import FPS_PER_KT, G0_FPS2, RAD_PER_DEG
 

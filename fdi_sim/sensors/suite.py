@@ -20,8 +20,8 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+import fdi_sim.sensors._kernels as K  # the module, not its package (no import cycle through __init__)
 from fdi_sim.data import aircraft_file  # aircraft/ in a checkout, packaged in a wheel
-from fdi_sim.sensors import _kernels as K
 
 BLOCK_STEPS = 120  # noise rows drawn at a time, one simulated second at 120 Hz
 
