@@ -2,7 +2,7 @@
 
 Per aircraft, at the cruise, climb and approach points of the shipped scenarios
 (:data:`POINTS`): each scenario with its faults removed, in moderate turbulence, flown for
-``duration_s`` (10 minutes) with held-out seeds (101-108; the bank's training flights use seeds
+``duration_s`` (10 minutes) with held-out seeds (201-208; the bank's training flights use seeds
 1e6 + i), the default bank in the loop, FDI topics only (``[log] per_step = false``). Every alarm
 episode is a false alarm. The rate per flight hour is given with its exact Poisson interval
 (Garwood) beside the bank's design rate ``far_per_h``.
@@ -30,7 +30,11 @@ POINTS: dict[str, tuple[str, ...]] = {
     "f16": ("f16_cruise_doublets", "f16_climbing_turn", "f16_climb_accelerate"),
     "DHC6": ("dhc6_cruise_doublets", "dhc6_climb", "dhc6_approach_flaps"),
 }
-HELD_OUT_SEEDS = tuple(range(101, 109))
+#: seeds 101-108 were looked at while the threshold method was chosen (the DHC-6 airspeed check's
+#: point-estimate threshold alarmed 3 times on them, which led to the bootstrap bound); the bar is
+#: reported on 201-208, which no design decision saw
+DEVELOPMENT_SEEDS = tuple(range(101, 109))
+HELD_OUT_SEEDS = tuple(range(201, 209))
 S_PER_H = 3600.0
 
 
@@ -104,7 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=600.0)
     p.add_argument("--json", default=None)
     a = p.parse_args(argv)
-    seeds = tuple(101 + i for i in range(a.seeds))
+    seeds = tuple(HELD_OUT_SEEDS[0] + i for i in range(a.seeds))
     rows = []
     print(f"{'scenario':24} {'flights':>7} {'hours':>6} {'alarms':>6} {'per h':>7} {'95 % interval':>16} {'design':>7}")
     for names in POINTS.values():

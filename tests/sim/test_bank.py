@@ -153,3 +153,41 @@ def test_a_decision_rule_that_needs_fault_directions(tmp_path, f16_text):
     with pytest.raises(ScenarioError, match="fault directions"):
         run(sc, tmp_path, progress=False)
     assert not list(tmp_path.glob("*.mcap"))
+
+
+def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
+    """The bank's k-of-n kernel on a chi-square(3) statistic of white noise: the fraction of samples
+    in alarm is P(Bin(n, p) >= k) (decision.persistence, exact), inside the 99.9 % Clopper-Pearson
+    interval counted over independent n-sample blocks; and splitting the input changes nothing."""
+    from scipy.stats import chi2
+
+    from fdi_sim.decision.intervals import clopper_pearson
+    from fdi_sim.decision.persistence import persistence_false_alarm
+    from fdi_sim.sim.bank import _decide
+
+    rng = np.random.default_rng(8)
+    N, k, n, p = 400_000, 2, 5, 0.05
+    stat = rng.chisquare(3, size=N)
+    thr = np.full(N, chi2.isf(p, 3))
+    valid = np.ones(N, dtype=np.bool_)
+    hyp = np.zeros(N, dtype=np.int64)
+
+    def go(blocks):
+        ring, st, votes = np.zeros(n, np.int64), np.array([0, 0, 0, -1, 0], np.int64), np.zeros(1, np.int64)
+        ex, al, iso = np.empty(N, np.bool_), np.empty(N, np.bool_), np.empty(N, np.int64)
+        i = 0
+        for b in blocks:
+            sl = slice(i, min(N, i + int(b)))
+            _decide(stat[sl], thr[sl], valid[sl], hyp[sl], k, False, ring, st, votes, ex[sl], al[sl], iso[sl])
+            i += int(b)
+        return ex, al, iso
+
+    ex, al, iso = go([N])
+    expect = persistence_false_alarm(p, k, n)
+    m = N // n
+    lo, hi = clopper_pearson(int(round(al.mean() * m)), m, level=0.999)
+    assert lo <= expect <= hi, (al.mean(), expect)
+    assert abs(ex.mean() - p) < 4 * np.sqrt(p * (1 - p) / N)
+    assert np.all(iso[al] == 0) and np.all(iso[~al] == -1)
+    ex2, al2, iso2 = go(rng.integers(1, 40, size=N))
+    assert np.array_equal(al, al2) and np.array_equal(iso, iso2)
