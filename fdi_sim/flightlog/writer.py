@@ -358,19 +358,35 @@ class VectorChannel:
 
     def write_rows(self, t_s: NDArray[np.float64], values: NDArray[np.float64]) -> None:
         """Log several rows at once (a detector block): ``t_s`` (N,) increasing [s], ``values``
-        (N, len(fields) - 1). The same messages as N calls of :meth:`write`."""
-        t = np.asarray(t_s, dtype=np.float64)
-        v = np.asarray(values)
-        n = len(t)
+        (N, len(fields) - 1) float64. The same messages as N calls of :meth:`write`; rows inside the
+        current flush window go in as one buffer (a block that crosses the window's end is split
+        there, the flush happening where :meth:`write` would do it)."""
+        n = len(t_s)
         if n == 0:
             return
-        if (v.shape == (n,) + self._shape and 0.0 <= t[0] and t[-1] < self._w._hi_t_s
-                and (n == 1 or bool(np.all(np.diff(t) >= 0)))):
-            self._t.extend(t.tolist())
-            self._b.append(np.ascontiguousarray(v, dtype="<f8").tobytes())
+        v = values
+        if not (type(v) is _NDARRAY and v.dtype is _F8_LE and v.shape == (n,) + self._shape and v.flags.c_contiguous):
+            v = np.ascontiguousarray(values, dtype="<f8")
+            if v.shape != (n,) + self._shape:
+                raise LogError(str(self._w.path), f"{self.topic}: write_rows() needs (N, {self.schema.n_values}) "
+                               f"values for {self.schema.fields[1:]} (without t_s), got {v.shape}")
+        t = t_s.tolist() if type(t_s) is _NDARRAY else [float(x) for x in t_s]
+        w = self._w
+        if 0.0 <= t[0] and t[-1] < w._hi_t_s:  # the common case: the whole block in the flush window
+            self._t.extend(t)
+            self._b.append(v.tobytes())
             return
-        for i in range(n):  # a block across a flush window, or bad input (the general checks)
-            self.write(float(t[i]), np.ascontiguousarray(v[i], dtype=np.float64) if v.ndim == 2 else v[i])
+        i = 0
+        while i < n:
+            if not (0.0 <= t[i] < w._hi_t_s):
+                w._admit_time(t[i], self.topic)  # checks the time; flushes when it leaves the window
+            hi = w._hi_t_s
+            j = i + 1
+            while j < n and t[j] < hi:
+                j += 1
+            self._t.extend(t[i:j])
+            self._b.append(v[i:j].tobytes())
+            i = j
 
     def _values_slow_path(self, values: Any) -> bytes:
         if not isinstance(values, np.ndarray):
@@ -627,6 +643,13 @@ class FlightLogWriter:
             self._file.abort()
             raise LogError(str(self.path), f"write failed ({exc}); the file was left without "
                            "its summary: run `fdi-sim repair` on it") from None
+
+    @property
+    def window_end_s(self) -> float:
+        """End of the current flush window [s]: the first write at or after it flushes. A caller
+        writing a block of rows on several channels writes every channel's rows before it first,
+        so that each chunk holds the same times on every channel (the regular, fast layout)."""
+        return self._hi_t_s
 
     def _admit_time(self, t_s: Any, topic: str) -> None:
         """Check the time of a write; flush first if it leaves the current flush window.

@@ -75,14 +75,37 @@ def _gather(meas, valid, cols, excluded, every, row0, n, y, ok, fresh):  # pragm
 
 
 @numba.njit(cache=True, nogil=True)
+def _take_cols(src, cols, out):  # pragma: no cover - compiled
+    """``out[j, c] = src[j, cols[c]]`` (a member's inputs from the command averages)."""
+    for j in range(out.shape[0]):
+        for c in range(cols.shape[0]):
+            out[j, c] = src[j, cols[c]]
+
+
+@numba.njit(cache=True, nogil=True)
+def _stat_rows(stat, thr, exceed, alarm, valid, iso, point, out):  # pragma: no cover - compiled
+    """The rows of ``/fdi/<id>/statistic`` (:data:`STAT_FIELDS` after ``t_s``)."""
+    for j in range(stat.shape[0]):
+        out[j, 0] = stat[j]
+        out[j, 1] = thr[j]
+        out[j, 2] = 1.0 if exceed[j] else 0.0
+        out[j, 3] = 1.0 if alarm[j] else 0.0
+        out[j, 4] = 1.0 if valid[j] else 0.0
+        out[j, 5] = iso[j]
+        out[j, 6] = point[j]
+
+
+@numba.njit(cache=True, nogil=True)
 def _decide(stat, thr, valid, hyp, k, need_direction, ring, st, votes, exceed, alarm, iso):  # pragma: no cover
     """k-of-n persistence and the isolation vote, carried across blocks.
 
-    ``ring`` (n,) last exceedances; ``st`` = [ring position, count, alarm on, leader, leader votes];
+    ``ring`` (n,) last exceedances; ``st`` = [ring position, count, alarm on, leader, leader votes,
+    an alarm in this call];
     ``votes`` (H,) votes of the current alarm. With ``need_direction`` (the two-step rule) a sample
     exceeds only if its residual is also within the angle bound of some fault direction
     (``hyp >= 0``: the detector's cosine test passed)."""
     n = ring.shape[0]
+    st[5] = 0
     for j in range(stat.shape[0]):
         e = valid[j] and stat[j] > thr[j] and (hyp[j] >= 0 or not need_direction)
         exceed[j] = e
@@ -105,6 +128,8 @@ def _decide(stat, thr, valid, hyp, k, need_direction, ring, st, votes, exceed, a
                 st[3] = -1
                 st[4] = 0
         st[2] = 1 if on else 0
+        if on:
+            st[5] = 1
         alarm[j] = on
         iso[j] = st[3] if on else -1
 
@@ -183,6 +208,8 @@ class _Member:
         self.alarm = np.empty(S, dtype=np.bool_)
         self.iso = np.empty(S, dtype=np.int64)
         self.point = np.zeros(S, dtype=np.int64)
+        self.rows = np.empty((S, 7))  # the statistic topic's rows (STAT_FIELDS after t_s)
+        self.full_S = S
         if kind == "gust":
             missing = [nm for nm in stream.input_names if nm not in cmd_names]
             if missing:
@@ -196,7 +223,13 @@ class _Member:
             self.residual_names = tuple(stream.channels)
             self.nu = np.empty((S, len(self.residual_names)))
         self.decision = decision
+        self.angle_rule = decision.rule == "angle-magnitude"
         self.keep = False
+        if kind == "gust":
+            self.u = np.empty((S, len(self.in_cols)))
+        self._arrays = (self.y, self.ok, self.fresh, self.stat, self.thr, self.valid, self.hyp, self.exceed, self.alarm,
+                        self.iso, self.nu)
+        self._full = tuple(a[:S] for a in self._arrays)
         self.reset()
 
     def set_threshold(self, value: float) -> None:
@@ -221,32 +254,35 @@ class _Member:
         self.excluded[:] = False
         d = self.decision
         self.ring = np.zeros(d.n, dtype=np.int64)
-        self.st = np.array([0, 0, 0, -1, 0], dtype=np.int64)
+        self.st = np.array([0, 0, 0, -1, 0, 0], dtype=np.int64)
         self.votes = np.zeros(max(1, len(self.hypotheses)), dtype=np.int64)
         self.was_on = False
+        self.sparse: list[tuple[int, NDArray[np.bool_], NDArray[np.int64]]] = []  # (first sample, alarm, isolation)
+        self.samples = 0
 
     def run(self, u_avg: NDArray[np.float64], meas: NDArray[np.float64], valid: NDArray[np.bool_], row0: int,
             n: int, S: int, t: NDArray[np.float64], unarmed: int = 0) -> None:
-        y, ok, fresh = self.y[:S], self.ok[:S], self.fresh[:S]
+        if S == self.full_S:  # the loop's case: views made once (slicing costs ~0.2 us a view)
+            y, ok, fresh, stat, thr, val, hyp, ex, al, iso, nu = self._full
+        else:
+            y, ok, fresh, stat, thr, val, hyp, ex, al, iso, nu = (a[:S] for a in self._arrays)
         _gather(meas, valid, self.cols, self.excluded, self.every, row0, n, y, ok, fresh)
         if self.kind == "gust":
-            u = u_avg[:S][:, self.in_cols]
-            self.stream.process(u, y, ok, self.stat[:S], self.thr[:S], self.valid[:S], self.hyp[:S], self.cos[:S],
-                                self.point[:S], self.nu[:S], self.yhat[:S])
+            u = self.u[:S]
+            _take_cols(u_avg, self.in_cols, u)
+            self.stream.process(u, y, ok, stat, thr, val, hyp, self.cos[:S], self.point[:S], nu, self.yhat[:S])
         else:
-            self.thr[:S] = self.stream.threshold
-            self.stream.process(t[:S], y, ok, fresh, self.stat[:S], self.valid[:S], self.hyp[:S], self.nu[:S])
+            thr[:] = self.stream.threshold
+            self.stream.process(t[:S], y, ok, fresh, stat, val, hyp, nu)
         if unarmed:  # before the bank is armed the statistic is logged, never decided on
-            self.valid[:unarmed] = False
-        _decide(self.stat[:S], self.thr[:S], self.valid[:S], self.hyp[:S], self.decision.k,
-                self.decision.rule == "angle-magnitude", self.ring, self.st,
-                self.votes, self.exceed[:S], self.alarm[:S], self.iso[:S])
+            val[:unarmed] = False
+        _decide(stat, thr, val, hyp, self.decision.k, self.angle_rule, self.ring, self.st, self.votes, ex, al, iso)
         if self.keep:
             for k in TRACE_FIELDS:
                 self.trace[k].append(getattr(self, TRACE_ATTR[k])[:S].copy())
-        else:  # always: the decisions (1 + 8 bytes a sample), for the run summary
-            self.trace["alarm"].append(self.alarm[:S].copy())
-            self.trace["isolation"].append(self.iso[:S].copy())
+        elif self.st[5] or self.was_on:  # the decisions of blocks with an alarm (the others: none), for the summary
+            self.sparse.append((row0 // n, al.copy(), iso.copy()))
+        self.samples += S
 
 
 @dataclass
@@ -372,8 +408,15 @@ class FdiBank:
         t = np.concatenate(self._t_trace) if self._t_trace else np.zeros(0)
         out = {}
         for m in self.members:
-            a = np.concatenate(m.trace["alarm"]) if m.trace["alarm"] else np.zeros(0, dtype=bool)
-            i = np.concatenate(m.trace["isolation"]) if m.trace["isolation"] else np.zeros(0, dtype=np.int64)
+            if m.trace["alarm"]:  # a kept trace (replay, calibration, tests)
+                a = np.concatenate(m.trace["alarm"])
+                i = np.concatenate(m.trace["isolation"])
+            else:
+                a = np.zeros(m.samples, dtype=bool)
+                i = np.full(m.samples, -1, dtype=np.int64)
+                for j0, al, iso in m.sparse:
+                    a[j0:j0 + len(al)] = al
+                    i[j0:j0 + len(al)] = iso
             out[m.id] = (a, tuple(m.hypotheses[k] if on and k >= 0 else None for k, on in zip(i, a)))
         return t, out
 
@@ -431,9 +474,10 @@ class FdiBank:
         self._t_trace.append(self._t[:S].copy())
         self._run(self._u_avg[:S], self.meas_rows[:S], self.valid_rows[:S], self._t[:S], S)
 
-    def pilot_input(self, y: list[float]) -> list[float]:
-        """The measurements the pilot receives: ``y`` with the reconfigured sensors corrected."""
-        yp = list(y)
+    def pilot_input(self, y: Any) -> Any:
+        """The measurements the pilot receives: ``y`` (a list or an array, the same kind back) with
+        the reconfigured sensors corrected."""
+        yp = y.copy() if isinstance(y, np.ndarray) else list(y)
         for c in self.corrections:
             yp[c.index] = y[c.index] - c.fault_estimate
         return yp
@@ -465,7 +509,7 @@ class FdiBank:
         unarmed = min(S, max(0, self.arm_samples - self.samples_done))
         for m in self.members:
             m.run(u_avg, meas, valid, row0, self.n, S, t, unarmed)
-            if m.was_on or m.alarm[S - 1] or m.alarm[:S].any():
+            if m.was_on or m.st[5]:  # in alarm before the block or at some sample of it
                 active = True
         changed = False
         if active:
@@ -588,20 +632,22 @@ class FdiBank:
                 c.fault_estimate = float(d.mean())
 
     def _log(self, t: NDArray[np.float64], S: int) -> None:
-        for m, ch in zip(self.members, self._chans):
-            rows = np.empty((S, len(STAT_FIELDS) - 1))
-            rows[:, 0] = m.stat[:S]
-            rows[:, 1] = m.thr[:S]
-            rows[:, 2] = m.exceed[:S]
-            rows[:, 3] = m.alarm[:S]
-            rows[:, 4] = m.valid[:S]
-            rows[:, 5] = m.iso[:S]
-            rows[:, 6] = m.point[:S]
-            ch.stat.write_rows(t[:S], rows)
-            if ch.resid is not None:
-                ch.resid.write_rows(t[:S], m.nu[:S])
-            if ch.est is not None:
-                ch.est.write_rows(t[:S], m.yhat[:S])
+        for m in self.members:
+            _stat_rows(m.stat[:S], m.thr[:S], m.exceed[:S], m.alarm[:S], m.valid[:S], m.iso[:S], m.point[:S],
+                       m.rows[:S])
+        # every channel's rows before the writer's flush boundary first, then the rest: each chunk
+        # then holds the same sample times on every /fdi channel (writer.window_end_s)
+        end = self._writer.window_end_s
+        cut = S if t[S - 1] < end else int(np.searchsorted(t[:S], end, side="left"))
+        for a, b in ((0, cut), (cut, S)):
+            if a == b:
+                continue
+            for m, ch in zip(self.members, self._chans):
+                ch.stat.write_rows(t[a:b], m.rows[a:b])
+                if ch.resid is not None:
+                    ch.resid.write_rows(t[a:b], m.nu[a:b])
+                if ch.est is not None:
+                    ch.est.write_rows(t[a:b], m.yhat[a:b])
 
 
 def _msg_name(detector_id: str, what: str) -> str:

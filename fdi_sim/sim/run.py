@@ -513,6 +513,10 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     read_truth = ac.list_reader(truth_names)
     read_surf = ac.list_reader(SURFACE_SIGNALS)
     measure = sensors.step_list
+    measure_into, pilot_into = sensors.measure_into, pilot.step_into
+    x_arr = np.empty(len(truth_signals(sc.aircraft)))
+    y = np.empty(len(sensors.names))  # the measurements of the fast path (refilled each step)
+    u_arr = np.empty(8)  # the pilot's commands and references (refilled each step)
     write_cmd = ac.command_writer()
     idx = {n: i for i, n in enumerate(truth_names)}
     i_h, i_vc, i_vt, i_phi, i_alpha, i_mach = idx["h_ft"], idx["vc_kts"], idx["vt_fps"], idx["phi_rad"], idx["alpha_rad"], idx["mach"]
@@ -569,8 +573,11 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 raise SimulationDiverged(t_s, f"body rate beyond {rate_max} rad/s")
             if xl[i_vc] < vc_min:
                 raise SimulationDiverged(t_s, f"airspeed {xl[i_vc]:.1f} kt below {vc_min}")
-            y = measure(t_s, xl)
-            if inj is not None:
+            if inj is None:  # the fast path: preallocated arrays through the compiled sensors and pilot
+                x_arr[:] = xl
+                measure_into(t_s, x_arr, y)
+            else:  # faults act on lists (the injector's contract)
+                y = measure(t_s, xl)
                 inj.begin_step(t_s)
                 y = inj.sensors(t_s, k, y, xl)
             # --- the FDI bank: the sample's measurement; at a block's end, the block ---------------
@@ -585,7 +592,8 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                         corrected = True
             y_pilot = bank.pilot_input(y) if corrected else y
             if inj is None:
-                _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y_pilot)  # PilotCommand fields
+                pilot_into(t_s, y_pilot, u_arr)
+                el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = u_arr.tolist()
                 write_cmd(el, ai, ru, th)
             else:  # faults: sensors -> pilot -> commands -> plant (surfaces, engines, icing)
                 _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y_pilot)
