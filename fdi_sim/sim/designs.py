@@ -69,7 +69,8 @@ Caches
   the scenario's sensor suite file and the default one, and the package version. A second call
   with the same arguments flies nothing.
 * Linearizations are not cached: trimming and linearizing a point costs 0.3-0.5 s (measured,
-  F-16 and DHC-6, no validation) and the design 0.1 s, against 1 s of the brief's bar.
+  F-16 and DHC-6, no validation) and the design 0.1 s; a call whose calibrations are all cached
+  takes 2 s for the climb's 4 points, against 90 s flying them.
 """
 from __future__ import annotations
 
@@ -134,6 +135,18 @@ def default_spacing(aircraft: str) -> tuple[float, float]:
         raise DesignError(f"no default schedule spacing for aircraft {aircraft!r}; give h_spacing_ft and "
                           f"vc_spacing_kts (known: {', '.join(DEFAULT_SPACING)})")
     return DEFAULT_SPACING[aircraft]
+
+
+def _spacing(aircraft: str, h_spacing_ft: float | None, vc_spacing_kts: float | None) -> tuple[float, float]:
+    """The given spacings, the aircraft's default for the missing ones [ft], [kt]."""
+    if h_spacing_ft is None or vc_spacing_kts is None:
+        dh, dv = default_spacing(aircraft)
+        h_spacing_ft = dh if h_spacing_ft is None else h_spacing_ft
+        vc_spacing_kts = dv if vc_spacing_kts is None else vc_spacing_kts
+    dh, dv = float(h_spacing_ft), float(vc_spacing_kts)
+    if not (dh > 0 and dv > 0):  # also refuses NaN
+        raise DesignError(f"schedule spacing must be positive; got h {dh:g} ft, vc {dv:g} kt")
+    return dh, dv
 
 
 def initial_vc_kts(sc: Scenario) -> float:
@@ -218,11 +231,7 @@ def schedule_points(sc: Scenario, *, h_spacing_ft: float | None = None,
     list of DesignPoint
         ``(h_ft, vc_kts, flaps_deg)``; flaps are the initial ones (no maneuver moves them).
     """
-    dh, dv = default_spacing(sc.aircraft) if h_spacing_ft is None or vc_spacing_kts is None else (0.0, 0.0)
-    dh = float(h_spacing_ft if h_spacing_ft is not None else dh)
-    dv = float(vc_spacing_kts if vc_spacing_kts is not None else dv)
-    if not (dh > 0 and dv > 0):
-        raise DesignError(f"schedule spacing must be positive; got h {dh:g} ft, vc {dv:g} kt")
+    dh, dv = _spacing(sc.aircraft, h_spacing_ft, vc_spacing_kts)
     _, h, v, h_way, v_way = reference_path(sc)
     hn, vn = _axis_nodes(h_way, dh), _axis_nodes(v_way, dv)
     # nearest node of a product grid in the scaled distance = nearest value on each axis
@@ -267,7 +276,7 @@ class _Failure(NamedTuple):
 
 
 def _linearize_points(sc: Scenario, points: Sequence[DesignPoint]) -> tuple[list[Any], list[_Failure]]:
-    """One ``linearize_grid`` call over the points (one grid block each); per point its continuous
+    """One ``linearize_grid`` call over a grid of exactly these points: per point its continuous
     model or None, and the failures (outside the envelope, untrimmable) with the trim's reason."""
     from fdi_sim.linear.grid import parse_grid_spec
     from fdi_sim.linear.linearize import linearize_grid
@@ -368,9 +377,7 @@ def design_schedule(sc: Scenario, points: Sequence[Sequence[float]], *, rate_hz:
         raise DesignError(f"{sc.source}: no schedule points given")
     if len(set(pts)) != len(pts):
         raise DesignError(f"{sc.source}: schedule points repeat: {[p.label() for p in pts]}; give each point once")
-    dh, dv = default_spacing(sc.aircraft) if h_spacing_ft is None or vc_spacing_kts is None else (0.0, 0.0)
-    spacing = np.array([h_spacing_ft if h_spacing_ft is not None else dh,
-                        vc_spacing_kts if vc_spacing_kts is not None else dv], dtype=float)
+    spacing = np.array(_spacing(sc.aircraft, h_spacing_ft, vc_spacing_kts))
     t0 = time.perf_counter()
     models, fails = _linearize_points(sc, pts)
     t_lin = time.perf_counter() - t0
