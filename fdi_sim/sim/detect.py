@@ -357,7 +357,12 @@ def first_alarm(t_s: NDArray[np.float64], alarm: NDArray[np.bool_], isolation: S
         return None, None
     t1 = float(t_s[idx[0]])
     named = [isolation[k] for k in idx if t_s[k] < t1 + ISOLATION_WINDOW_S and isolation[k] is not None]
-    return t1, (max(set(named), key=named.count) if named else None)
+    if not named:
+        return t1, None
+    # the most frequent; a tie goes to the one named first (max over a set would follow the
+    # process's string-hash seed: the same log gave nx_g in one process, throttle in another)
+    best = max(named.count(h) for h in named)
+    return t1, next(h for h in named if named.count(h) == best)
 
 
 def fault_outcome(f: Mapping[str, Any], t_s: NDArray[np.float64], alarm: NDArray[np.bool_],
