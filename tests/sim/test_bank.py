@@ -173,7 +173,7 @@ def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
     hyp = np.zeros(N, dtype=np.int64)
 
     def go(blocks):
-        ring, st, votes = np.zeros(n, np.int64), np.array([0, 0, 0, -1, 0], np.int64), np.zeros(1, np.int64)
+        ring, st, votes = np.zeros(n, np.int64), np.array([0, 0, 0, -1, 0, 0], np.int64), np.zeros(1, np.int64)
         ex, al, iso = np.empty(N, np.bool_), np.empty(N, np.bool_), np.empty(N, np.int64)
         i = 0
         for b in blocks:
