@@ -4,6 +4,7 @@ Per detector sample ``j`` (the time convention of :mod:`fdi_sim.detectors.sample
 command averaged over the interval ending at ``t_j``, ``y_j`` measured at ``t_j``), with the active
 schedule point ``c`` (:mod:`fdi_sim.detectors.scheduled`)::
 
+    schedule s_j = s_{j-1} + (y_s,j - s_{j-1}) / (tau rate)      (measured h, vc, low-passed)
     switch   i = argmin_i d_i(s_j);  if d_c - d_i > hysteresis:  x += x0_c - x0_i,  c = i
     predict  yhat_j = y0_c + C_c x + D_c (u_j - u0_c)
     innovate nu_j = y_j - yhat_j          (0 for a missing or excluded measurement)
@@ -39,7 +40,7 @@ TWO_PI = 2.0 * math.pi
 
 @numba.njit(cache=True, nogil=True)
 def _process(A, B, C, D, G, u0, y0, x0, L, Si_g, g_Si_g, Si, thr, points, spacing, hyst, min_cos, wrap,
-             i_sched, k0, x, buf, st, u, y, ok,
+             i_sched, k0, a_sched, s_f, x, buf, st, u, y, ok,
              out_T, out_thr, out_valid, out_hyp, out_cos, out_point, out_nu, out_yhat):  # pragma: no cover
     P, n, _ = A.shape
     p = C.shape[1]
@@ -62,13 +63,15 @@ def _process(A, B, C, D, G, u0, y0, x0, L, Si_g, g_Si_g, Si, thr, points, spacin
                 if not ok[j, i_sched[s]]:
                     okall = False
             if okall:
+                for s in range(S):  # first-order low pass: turbulence moves vc by ~5 kt rms
+                    s_f[s] += a_sched * (y[j, i_sched[s]] - s_f[s])
                 best = 0
                 dbest = 1e300
                 dc = 0.0
                 for i in range(P):
                     d2 = 0.0
                     for s in range(S):
-                        e = (y[j, i_sched[s]] - points[i, s]) / spacing[s]
+                        e = (s_f[s] - points[i, s]) / spacing[s]
                         d2 += e * e
                     d = math.sqrt(d2)
                     if d < dbest:
@@ -233,6 +236,7 @@ class GustKalmanStream:
         self._i_sched = np.array([self.output_names.index(s) for s in SCHEDULE_SIGNALS], dtype=np.int64)
         self._k0 = settle_samples(d0)
         self.window_n = d0.window_n
+        self._a_sched = 1.0 / max(1.0, schedule.tau_s * self.rate_hz)  # low pass of the scheduling signals
         self.reset()
 
     @property
@@ -245,10 +249,12 @@ class GustKalmanStream:
         self._x = np.zeros(n)
         self._buf = np.zeros((self.window_n, self.n_outputs))
         self._st = np.array([0, 0 if point is None else int(point), 0], dtype=np.int64)  # j, active point, alarm start
+        self._s_f = self.schedule.points[int(self._st[1])].astype(float).copy()  # the low-passed (h_ft, vc_kts)
 
     def start_at(self, h_ft: float, vc_kts: float) -> None:
         """Reset at the point nearest the given scheduling values (the flight's start)."""
         self.reset(self.schedule.nearest((h_ft, vc_kts)))
+        self._s_f[:] = (h_ft, vc_kts)
 
     @property
     def active_point(self) -> int:
@@ -266,6 +272,6 @@ class GustKalmanStream:
         _process(self._A, self._B, self._C, self._D, self._G, self._u0, self._y0, self._x0, self._L, self._Si_g,
                  self._g_Si_g, self._Si, self._thr, self.schedule.points, self.schedule.spacing,
                  float(self.schedule.hysteresis), self.min_cosine, self._wrap, self._i_sched, self._k0,
-                 self._x, self._buf, self._st, u, y, ok,
+                 self._a_sched, self._s_f, self._x, self._buf, self._st, u, y, ok,
                  out_statistic, out_threshold, out_valid, out_hypothesis, out_cosine, out_point, out_innovation,
                  out_estimate)

@@ -5,9 +5,10 @@ aerodynamic derivative), so a filter designed at one trim point mismatches the a
 climbs or accelerates away from it. A :class:`GustKalmanSchedule` holds a design (and its
 calibration) at each of ``P`` schedule points; the streaming kernel
 (:mod:`fdi_sim.detectors.gust_kalman_stream`) uses at each detector sample the design of the
-point nearest the *measured* scheduling variables, in units of the grid spacing::
+point nearest the *measured* scheduling variables (low-passed, ``tau_s``), in units of the grid
+spacing::
 
-    d_i = || (s - s_i) / spacing ||_2,     s = (h_ft, vc_kts) measured
+    d_i = || (s - s_i) / spacing ||_2,     s = (h_ft, vc_kts) measured, low-passed
 
 and switches from the active point ``c`` to the nearest ``i`` only when ``d_c - d_i >
 hysteresis`` (no chattering on a boundary in turbulence). Switching is bumpless: the filter's
@@ -31,6 +32,9 @@ from fdi_sim.errors import DesignError
 SCHEDULE_SIGNALS: tuple[str, ...] = ("h_ft", "vc_kts")
 #: switch only when the new point is this much nearer, in grid spacings (hysteresis)
 DEFAULT_HYSTERESIS = 0.1
+#: time constant of the low pass on the measured scheduling signals [s]: moderate turbulence moves
+#: the measured vc by about 5 kt rms about the steady-air speed, more than the DHC-6's 4 kt spacing
+DEFAULT_TAU_S = 5.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,6 +56,8 @@ class GustKalmanSchedule:
         What each point is (``"h 10000 ft, vc 300 kt"``).
     hysteresis : float
         Switching hysteresis [grid spacings].
+    tau_s : float
+        Time constant of the first-order low pass on the measured scheduling signals [s].
     notes : tuple of str
         How the designs and calibrations were made (for the log and the report).
     """
@@ -63,6 +69,7 @@ class GustKalmanSchedule:
     labels: tuple[str, ...] = ()
     hysteresis: float = DEFAULT_HYSTERESIS
     notes: tuple[str, ...] = field(default=())
+    tau_s: float = DEFAULT_TAU_S
 
     def __post_init__(self) -> None:
         P = len(self.designs)
