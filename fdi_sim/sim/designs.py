@@ -257,7 +257,8 @@ def point_scenario(sc: Scenario, point: Sequence[float]) -> Scenario:
 
     ``initial`` moved to the point (h, calibrated airspeed, flaps; level and wings level; heading
     kept), only the pulse-train maneuvers kept (no altitude, airspeed, heading or turn changes),
-    faults and detectors removed; atmosphere, autopilot, sensors, limits and rate kept.
+    faults, detectors and the ``[fdi]`` bank removed; atmosphere, autopilot, sensors, limits, log
+    and rate kept.
     """
     p = _as_point(point, sc)
     data = json.loads(sc.to_json())
@@ -267,6 +268,7 @@ def point_scenario(sc: Scenario, point: Sequence[float]) -> Scenario:
     built = _built_maneuvers(sc)  # the same order as the file's entries
     data["maneuvers"] = [e for e, (_, m) in zip(data.get("maneuvers", []), built) if isinstance(m, PulseTrain)]
     data.update(faults=[], detectors=[])
+    data.pop("fdi", None)  # no bank in the loop: a calibration flight would need calibrating itself
     data["name"] = f"{sc.name}_at_h{p.h_ft:.0f}_vc{p.vc_kts:.0f}"[:120]
     return from_dict(data, source=f"{sc.source} (calibration at {p.label()})")
 

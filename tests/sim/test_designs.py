@@ -65,6 +65,8 @@ def test_point_scenario_keeps_only_pulse_trains() -> None:
     assert len(ps.model.maneuvers) == sum(m["type"] == "doublet-v1" for m in sc.model.maneuvers)
     assert ps.model.atmosphere == sc.model.atmosphere and ps.model.sensors == sc.model.sensors
     assert not ps.model.faults and not ps.model.detectors
+    banked = load(SCENARIOS / "f16_pitch_gyro_bias.toml")
+    assert banked.model.fdi.bank == "default" and point_scenario(banked, (10000.0, 348.6)).model.fdi.bank == "none"
 
 
 # ------------------------------------------------------------------------- designs and calibrations
