@@ -109,10 +109,11 @@ from fdi_sim.errors import DesignError
 DEFAULT_BATCH_S = 2.0
 #: time constant of the post-start deficit (a fault still growing) [s]
 DEFAULT_SETTLE_S = 1.0
-#: Hankel singular values kept in the initial-error nuisance, relative to the largest [-]
-DEFAULT_NUISANCE_TOL = 1e-5
-#: at most this many nuisance directions
-MAX_NUISANCE = 16
+#: leading Hankel directions of the initial-error nuisance (the DHC-6's estimates agree to 0.005
+#: for 6 to 20 of them; the cost grows with (4 + R)^2 per sample and (4 + R)^4 per batch)
+DEFAULT_NUISANCE_DIM = 12
+#: Hankel singular values at or below this fraction of the largest are dropped (numerical rank) [-]
+NUISANCE_RANK_TOL = 1e-9
 #: past and future horizon of the Hankel operator [s]
 HANKEL_HORIZON_S = 30.0
 #: prior standard deviations of the fault parameters (a, c, a', c') [-] and of the nuisance z [-]
@@ -122,57 +123,89 @@ PRIOR_STD_Z = 1e4
 WEIGHTS = ("conservative", "design", "calibration")
 
 
-def initial_error_basis(A: NDArray[np.float64], b: NDArray[np.float64], C: NDArray[np.float64],
-                        d: NDArray[np.float64], K: NDArray[np.float64], S: NDArray[np.float64], n_steps: int,
-                        n_dirs: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Directions of the filter's error state that a past fault on one input leaves and the innovations show.
+@numba.njit(cache=True, nogil=True)
+def _gramians(A, b, C, d, G, WhC, j0, n_past, n_steps, Wc, Wo):  # pragma: no cover - compiled
+    """``Wc = R R'``, ``R[:, k] = Phi(j0, m + 1) bt_m`` (``m = j0 - 1 - k``), and ``Wo = O' O``,
+    ``O[k] = S^-1/2 C Phi(j0 + k, j0)`` (:func:`initial_error_basis`), with ``Phi`` the products
+    of ``Acl_j = A - A K_j C``."""
+    n = A.shape[0]
+    J = G.shape[0] - 1
+    Phi = np.eye(n)
+    for k in range(n_past):
+        m = j0 - 1 - k
+        AK = np.dot(A, np.ascontiguousarray(G[min(m, J)]))
+        r = np.dot(Phi, b - np.dot(AK, d))  # bt_m = b - A K_m d
+        Wc += np.outer(r, r)
+        Phi = np.dot(Phi, A - np.dot(AK, C))
+    Phi = np.eye(n)
+    for k in range(n_steps):
+        Ok = np.dot(WhC, Phi)
+        Wo += np.dot(Ok.T, Ok)
+        AK = np.dot(A, np.ascontiguousarray(G[min(j0 + k, J)]))
+        Phi = np.dot(A - np.dot(AK, C), Phi)
 
-    The error dynamics of the filter with the steady gain ``K`` and a fault ``f`` on the input
-    with columns ``b``, ``d``: ``err+ = Acl err + bt f``, ``Acl = A (I - K C)``,
-    ``bt = b - A K d``; the whitened innovation of a free response is ``S^-1/2 C err``. The
-    Hankel operator from the last ``n_steps`` fault samples to the next ``n_steps`` innovations is
-    ``O R`` (``R = [bt, Acl bt, ...]``, ``O = [S^-1/2 C; S^-1/2 C Acl; ...]``); its ``k``-th
-    right singular vector ``w_k`` gives the state ``R w_k``, whose free response has the energy
-    ``sigma_k^2``.
+
+def _sqrt_factor(W: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``L`` with ``L L' = W`` for a positive semi-definite ``W`` (eigenvalues below 0 as 0)."""
+    lam, U = np.linalg.eigh(0.5 * (W + W.T))
+    return U * np.sqrt(np.maximum(lam, 0.0))
+
+
+def initial_error_basis(A: NDArray[np.float64], b: NDArray[np.float64], C: NDArray[np.float64],
+                        d: NDArray[np.float64], G: NDArray[np.float64], S: NDArray[np.float64], j0: int, n_steps: int,
+                        n_dirs: int, rel_tol: float = 0.0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Directions of the filter's error state at sample ``j0`` that a past fault on one input leaves
+    and the later innovations show.
+
+    The error dynamics of the filter with the gains it uses (``K_j = G[min(j, J)]``) and a fault
+    ``f`` on the input with columns ``b``, ``d``: ``err(j+1) = Acl_j err(j) + bt_j f_j``,
+    ``Acl_j = A (I - K_j C)``, ``bt_j = b - A K_j d``; the whitened innovation of a free response
+    is ``S^-1/2 C err``. The Hankel operator from the fault samples ``j0 - n_steps .. j0 - 1`` (from
+    0 if ``j0`` is smaller) to the innovations ``j0 .. j0 + n_steps - 1`` is ``O R``, with
+    ``R = [bt_{j0-1}, Acl_{j0-1} bt_{j0-2}, ...]`` and ``O = [S^-1/2 C; S^-1/2 C Acl_{j0}; ...]``;
+    its ``k``-th right singular vector ``w_k`` gives the state ``R w_k``, whose free response has
+    the energy ``sigma_k^2``.
 
     Parameters
     ----------
-    A, b, C, d, K, S : NDArray
-        (n, n), (n,), (p, n), (p,), (n, p), (p, p): the paired model, the input's columns, the
-        steady gain and the innovation covariance of the weighting.
+    A, b, C, d, S : NDArray
+        (n, n), (n,), (p, n), (p,), (p, p): the paired model, the input's columns and the
+        innovation covariance of the weighting.
+    G : NDArray
+        (J + 1, n, p) the filter's gains by sample (the last one from then on).
+    j0 : int
+        The filter's sample count at the start.
     n_steps : int
         Past and future horizon [samples].
     n_dirs : int
         Directions returned.
+    rel_tol : float
+        Directions with ``sigma_k <= rel_tol sigma_0`` are returned as zero columns.
 
     Returns
     -------
     V : NDArray
         (n, n_dirs) the states ``R w_k / sigma_k`` (unit whitened output energy over the
-        horizon), largest ``sigma`` first; zero columns past the rank.
+        horizon), largest ``sigma`` first; zero columns past the rank (none at all for ``j0 = 0``:
+        nothing came before).
     sigma : NDArray
-        (min(n, n_steps),) the Hankel singular values [whitened innovation / command unit].
+        The Hankel singular values [whitened innovation / command unit].
     """
     n, p = A.shape[0], C.shape[0]
-    Acl = A @ (np.eye(n) - K @ C)
-    bt = b - A @ (K @ d)
-    Wh = np.linalg.cholesky(np.linalg.inv(S)).T  # Wh' Wh = S^-1
-    R = np.empty((n, n_steps))
-    O = np.empty((n_steps * p, n))
-    x = bt.copy()
-    Ok = Wh @ C
-    for k in range(n_steps):
-        R[:, k] = x  # Acl^k bt
-        x = Acl @ x
-        O[k * p:(k + 1) * p] = Ok  # S^-1/2 C Acl^k
-        Ok = Ok @ Acl
-    ro = np.linalg.qr(O, mode="r")  # O = Qo ro
-    rr = np.linalg.qr(R.T, mode="r")  # R = rr' Qr'
-    _, sig, vt = np.linalg.svd(ro @ rr.T)  # O R = Qo (ro rr') Qr'
     V = np.zeros((n, n_dirs))
+    n_past = min(int(n_steps), int(j0))
+    if n_past == 0:
+        return V, np.zeros(0)
+    Wh = np.linalg.cholesky(np.linalg.inv(S)).T  # Wh' Wh = S^-1
+    Wc, Wo = np.zeros((n, n)), np.zeros((n, n))
+    _gramians(np.ascontiguousarray(A), np.ascontiguousarray(b), np.ascontiguousarray(C), np.ascontiguousarray(d),
+              np.ascontiguousarray(G), np.ascontiguousarray(Wh @ C), int(j0), n_past, int(n_steps), Wc, Wo)
+    Lc = _sqrt_factor(Wc)  # R = Lc Q' for an orthonormal Q
+    Fo = _sqrt_factor(Wo).T  # Fo' Fo = O' O
+    _, sig, vt = np.linalg.svd(Fo @ Lc)  # the singular values of O R
     for k in range(min(n_dirs, len(sig))):
-        if sig[k] > 1e-300:
-            V[:, k] = rr.T @ vt[k] / sig[k]  # R w_k / sigma_k with w_k = Qr vt_k
+        if sig[k] > rel_tol * sig[0] and sig[k] > 0.0:
+            V[:, k] = Lc @ vt[k] / sig[k]  # R w_k / sigma_k
     return V, sig
 
 
@@ -207,7 +240,7 @@ def _update(A, b, C, d, G, Wt, S, V, cu, c1, rho, u, nu, ok, point, g0, L,
     n = A.shape[1]
     p = C.shape[1]
     q = X.shape[0]
-    R = V.shape[2]
+    R = V.shape[1]
     F = q - R
     J = G.shape[1] - 1
     N = u.shape[0]
@@ -219,13 +252,13 @@ def _update(A, b, C, d, G, Wt, S, V, cu, c1, rho, u, nu, ok, point, g0, L,
     idx = np.empty(p, dtype=np.int64)
     for j in range(N):
         c = point[j]
-        if st[0] == 0:  # the start: fault regressors from zero, the nuisance from this point's basis
+        if st[0] == 0:  # the start: fault regressors from zero, the nuisance from the start's basis
             for a in range(q):
                 for k in range(n):
                     X[a, k] = 0.0
             for r in range(R):
                 for k in range(n):
-                    X[F + r, k] = V[c, k, r]
+                    X[F + r, k] = V[k, r]
             for a in range(F):
                 wk[a] = 1.0
             st[0] = 1
@@ -388,8 +421,9 @@ class EffectivenessEstimator:
         constant from the start).
     batch_s : float
         Batch length of the sandwich covariance [s].
-    nuisance_tol : float
-        Hankel singular values kept in the initial-error nuisance, relative to the largest [-].
+    nuisance_dim : int
+        Leading Hankel directions of the initial-error nuisance (0: none, the fault's history
+        before the start ignored).
 
     Raises
     ------
@@ -400,12 +434,14 @@ class EffectivenessEstimator:
 
     def __init__(self, stream: GustKalmanStream, input_name: str, *, weights: str = "conservative",
                  settle_s: float | None = DEFAULT_SETTLE_S, batch_s: float = DEFAULT_BATCH_S,
-                 nuisance_tol: float = DEFAULT_NUISANCE_TOL) -> None:
+                 nuisance_dim: int = DEFAULT_NUISANCE_DIM) -> None:
         names = tuple(stream.input_names)
         _check_choice(input_name, names, f"{stream.id} has no input")
         _check_choice(weights, WEIGHTS, "no weighting")
         if not batch_s > 0.0 or (settle_s is not None and not settle_s > 0.0):
             raise DesignError(f"batch_s ({batch_s}) and settle_s ({settle_s}) must be > 0 s")
+        if not 0 <= int(nuisance_dim) <= stream._A.shape[1]:
+            raise DesignError(f"nuisance_dim {nuisance_dim} must be in 0 .. {stream._A.shape[1]} (the filter's states)")
         self.stream = stream
         self.input_name = input_name
         self.input_index = i = names.index(input_name)
@@ -425,18 +461,9 @@ class EffectivenessEstimator:
                         else conservative_covariance(S0, Sm))
         self._S = np.ascontiguousarray(np.stack(covs))
         self._Wt = np.ascontiguousarray(np.stack([np.linalg.inv(c) for c in self._S]))
-        n_steps = int(round(HANKEL_HORIZON_S * stream.rate_hz))
-        bases, sigmas = [], []
-        for c in range(len(designs)):
-            V, sig = initial_error_basis(self._A[c], self._b[c], self._C[c], self._d[c], self._G[c, -1], self._S[c],
-                                         n_steps, MAX_NUISANCE)
-            bases.append(V)
-            sigmas.append(sig)
-        R = max(int(np.count_nonzero(sg > nuisance_tol * sg[0])) if sg[0] > 0 else 0 for sg in sigmas)
-        self.n_nuisance = R = min(R, MAX_NUISANCE)
-        #: the Hankel singular values per point (what the nuisance keeps, and drops)
-        self.hankel_sigma: tuple[NDArray[np.float64], ...] = tuple(sigmas)
-        self._V = np.ascontiguousarray(np.stack([V[:, :R] for V in bases]))
+        self._n_steps = int(round(HANKEL_HORIZON_S * stream.rate_hz))
+        #: nuisance directions (the initial error's, computed at the start)
+        self.n_nuisance = R = int(nuisance_dim)
         # fault regressors: a (u), c (1), and the deficit a' (rho^k u), c' (rho^k)
         cu, c1, rho = [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]
         if settle_s is not None:
@@ -463,6 +490,9 @@ class EffectivenessEstimator:
         self._SMh = np.zeros((q, q, q))
         self._SMM = np.zeros((q, q, q, q))
         self._summary: EffectivenessSummary | None = None
+        self._V = np.zeros((self._A.shape[1], self.n_nuisance))
+        #: the Hankel singular values of the start (what the nuisance keeps, and drops)
+        self.hankel_sigma = np.zeros(0)
 
     def update(self, u: NDArray[np.float64], nu: NDArray[np.float64], point: NDArray[np.int64],
                gain_index_start: int, ok: NDArray[np.bool_] | None = None) -> None:
@@ -497,6 +527,11 @@ class EffectivenessEstimator:
             raise DesignError(f"update needs point ({N},) and ok ({N}, {p}); got {pt.shape} and {okm.shape}")
         if N == 0:
             return
+        if self._st[0] == 0 and self.n_nuisance:  # the start: the initial error's directions
+            c = int(pt[0])
+            self._V, self.hankel_sigma = initial_error_basis(
+                self._A[c], self._b[c], self._C[c], self._d[c], self._G[c], self._S[c], int(gain_index_start),
+                self._n_steps, self.n_nuisance, NUISANCE_RANK_TOL)
         _update(self._A, self._b, self._C, self._d, self._G, self._Wt, self._S, self._V, self._cu, self._c1,
                 self._rho, np.ascontiguousarray(u[:, self.input_index]), nu, okm, pt, int(gain_index_start),
                 self.batch_n, self._X, self._wk, self._st, self._Mb, self._hb, self._M, self._h, self._acc,
@@ -530,8 +565,9 @@ class EffectivenessEstimator:
         s2 = rss / dof if dof > 0 else nan
         var_m = float(P[0, 0])
         # sandwich meat sum_b g_b g_b', g_b = h_b - M_b theta: the closed batches from their sums, then the open one
-        Om = (self._Shh - np.einsum("ikj,k->ij", self._SMh, th) - np.einsum("jki,k->ij", self._SMh, th)
-              + np.einsum("ikjl,k,l->ij", self._SMM, th, th))
+        Mh = np.tensordot(self._SMh, th, axes=([1], [0]))  # sum_b (M_b theta) h_b'
+        MM = np.tensordot(np.tensordot(self._SMM, th, axes=([3], [0])), th, axes=([1], [0]))  # sum_b M_b theta theta' M_b
+        Om = self._Shh - Mh - Mh.T + MM
         if self._st[2] > 0:
             g = hb - Mb @ th
             Om = Om + np.outer(g, g)
