@@ -372,6 +372,7 @@ class FdiBank:
         self._u_avg = np.zeros((self.S, len(self.cmd_names)))
         self._t = np.empty(self.S)
         self._writer = None
+        self._ch_reconf = None
         self.reset()
 
     # --- lifecycle -----------------------------------------------------------------------------

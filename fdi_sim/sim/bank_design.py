@@ -316,9 +316,10 @@ def _replay_log(bank: Any, log: Any, *, raw_thresholds: bool = False) -> None:
     bank.replay(u, y, valid, dt, t_rows_s=np.asarray(meas.t_s[:K], dtype=float))
 
 
-def bank_for_log(log: Any, *, progress: bool = False) -> Any:
-    """The bank a log's scenario flew with, rebuilt (designs and thresholds from the cache, or
-    computed the same way), with the log's measurement and command columns.
+def bank_for_log(log: Any, *, progress: bool = False, bank: str | None = None) -> Any:
+    """The bank a log's scenario flew with (or, with ``bank="default"``, the default bank for that
+    scenario), rebuilt: designs and thresholds from the cache, or computed the same way, with the
+    log's measurement and command columns.
 
     Raises
     ------
@@ -333,7 +334,10 @@ def bank_for_log(log: Any, *, progress: bool = False) -> Any:
     meta = log.metadata.get(METADATA_SCENARIO)
     if not meta or "json" not in meta:
         raise LogError(str(log.path), "no 'scenario' metadata record: not a log written by `fdi-sim run`")
-    sc = from_dict(json.loads(meta["json"]), source=f"{log.path} (scenario metadata)")
+    data = json.loads(meta["json"])
+    if bank is not None:
+        data["fdi"] = {**data.get("fdi", {}), "bank": bank}
+    sc = from_dict(data, source=f"{log.path} (scenario metadata)")
     if not bank_members(sc):
         raise LogError(str(log.path), "its scenario has no FDI bank ([fdi] bank or [[detectors]]); give --detector "
                        "or --bank default instead")

@@ -445,10 +445,14 @@ def detect_log(path: str | Path, specs: Sequence[DetectorSpec], rate_hz: float =
 
 
 def _write(log: FlightLog, out: Path, traces: Sequence[DetectorTrace], rate_hz: float) -> Path:
+    """The input's topics plus the offline results; under ``/fdi/offline/`` when the log already
+    has an in-loop bank's ``/fdi`` topics (the two never share a topic or a schema name)."""
     vectors, alarms = [], []
+    inloop = any(t.startswith("/fdi/") for t in log.topics)
     for tr in traces:
         vals = np.column_stack([tr.statistic, tr.threshold, tr.alarm.astype(float), tr.valid.astype(float)])
-        vectors.append(NewVectorTopic(fdi_topic(tr.id, "statistic"), "fdi_sim/msg/DetectorStatistic",
+        topic = f"/fdi/offline/{tr.id}/statistic" if inloop else fdi_topic(tr.id, "statistic")
+        vectors.append(NewVectorTopic(topic, "fdi_sim/msg/OfflineDetectorStatistic",
                                       ("statistic", "threshold", "alarm", "valid"), tr.t_s, vals))
         a = tr.alarm
         before = np.concatenate(([False], a[:-1]))
@@ -459,14 +463,16 @@ def _write(log: FlightLog, out: Path, traces: Sequence[DetectorTrace], rate_hz: 
                     ev[key] = float(x)
             alarms.append((float(tr.t_s[j]), ev))
     alarms.sort(key=lambda e: e[0])
-    events = [NewEventTopic(TOPIC_FDI_ALARMS, "fdi_sim/msg/Alarm", ALARM_JSON_SCHEMA, tuple(alarms))]
+    events = [NewEventTopic("/fdi/offline/alarms" if inloop else TOPIC_FDI_ALARMS, "fdi_sim/msg/OfflineAlarm",
+                            ALARM_JSON_SCHEMA, tuple(alarms))]
     meta = {"detect": {"rate_hz": f"{rate_hz:g}", "detectors": json.dumps([t.id for t in traces]),
                        "source": str(log.path)}}
     return write_extended(log, out, vectors, events, meta)
 
 
-def replay_bank(path: str | Path) -> tuple[DetectReport, dict[str, Any]]:
-    """``fdi-sim detect LOG --bank scenario``: the log's in-loop bank replayed over its rows.
+def replay_bank(path: str | Path, bank: str | None = None) -> tuple[DetectReport, dict[str, Any]]:
+    """``fdi-sim detect LOG --bank scenario``: the log's in-loop bank replayed over its rows
+    (``bank="default"``: the default in-loop bank of the log's scenario, whatever it flew with).
 
     Returns the report and, per member, whether the replay equals the log's
     ``/fdi/<id>/statistic`` topic bit for bit (statistic, threshold, decision, isolation, point,
@@ -475,7 +481,7 @@ def replay_bank(path: str | Path) -> tuple[DetectReport, dict[str, Any]]:
     from fdi_sim.sim.bank_design import bank_for_log, replay_log
 
     log = read_log(path)
-    bank = bank_for_log(log)
+    name, bank = bank, bank_for_log(log, bank=bank, progress=True)
     t0 = time.perf_counter()
     traces = replay_log(log, bank)
     cost = (time.perf_counter() - t0) / max(1, bank.samples_done * len(bank.members)) * 1e6
@@ -488,9 +494,17 @@ def replay_bank(path: str | Path) -> tuple[DetectReport, dict[str, Any]]:
                            v["valid"].astype(bool), iso, cost)
         outcomes.append(outcome(tr, DetectorSpec(m.id), faults, bank.rate_hz))
         topic = fdi_topic(m.id, "statistic")
-        if topic in log.topics:
+        if topic in log.topics and bank_name_is_the_logs(log, name):
             tp = log.topics[topic]
             same[m.id] = all(np.array_equal(np.asarray(tp[k], dtype=float), np.asarray(v[k], dtype=float), equal_nan=True)
                              for k in ("t_s", "statistic", "threshold", "exceedance", "alarm", "valid", "isolation", "point"))
     return DetectReport(str(path), bank.meas_names and log.metadata.get(METADATA_SCENARIO, {}).get("aircraft", "?"),
                         bank.rate_hz, tuple(outcomes)), same
+
+
+def bank_name_is_the_logs(log: FlightLog, bank: str | None) -> bool:
+    """Whether the replayed bank is the one the log flew with (then its /fdi topics must match)."""
+    if bank is None:
+        return True
+    meta = json.loads(log.metadata.get(METADATA_SCENARIO, {}).get("json", "{}"))
+    return meta.get("fdi", {}).get("bank", "none") == bank and not meta.get("detectors")

@@ -44,14 +44,16 @@ def test_detect_json_shape_and_out_log(gyro_log: Path, tmp_path: Path) -> None:
     for key in ("first_alarm_s", "isolated_as"):
         assert key in fault
     assert "alternatives" in par["error"], "kalman-mmae-v1 without alternative models refuses with its reason"
-    # the out file: every input topic with its counts, plus the detector's statistic and the alarms
+    # the out file: every input topic with its counts (the in-loop bank's /fdi topics among them),
+    # plus the offline detector's statistic and alarms under /fdi/offline
     src, det = read_log(gyro_log), read_log(out)
+    assert "/fdi/kalman-gust-v1/statistic" in src.topics  # the shipped scenario flies with its bank
     for topic, n in src.message_counts.items():
         assert det.message_counts[topic] == n, topic
-    stat = det.topics["/fdi/kalman-nis-v1/statistic"]
+    stat = det.topics["/fdi/offline/kalman-nis-v1/statistic"]
     assert len(stat.t_s) == kal["samples"] and stat.fields == ("t_s", "statistic", "threshold", "alarm", "valid")
     assert int(stat["alarm"].sum()) == kal["alarm_samples"]
-    raised = [e for e in det.topics["/fdi/alarms"].events if e.payload["alarm"]]
+    raised = [e for e in det.topics["/fdi/offline/alarms"].events if e.payload["alarm"]]
     assert len(raised) == kal["alarm_onsets"]
     assert verify_log(out).ok
     with open(out, "rb") as f:
@@ -81,13 +83,17 @@ def test_detect_bad_input(gyro_log: Path, tmp_path: Path, capsys: pytest.Capture
 
 
 def test_default_bank_detects_and_isolates_the_gyro_bias(gyro_log: Path) -> None:
-    """`--bank default`: kalman-gust-v1 (calibrated on the scenario's fault-free flights) and the
-    kinematic attitude check both catch the pitch-gyro bias and name q_radps, with no alarm before it."""
+    """`--bank default`: the default in-loop bank replayed over the log (the log flew with it, so the
+    replay is also compared with its /fdi topics); kalman-gust-v1 and the kinematic attitude check
+    both catch the pitch-gyro bias and name q_radps, with no alarm before it."""
     r = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "detect", str(gyro_log), "--bank", "default", "--json"],
                        capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 0, r.stderr
-    rep = {d["id"]: d for d in json.loads(r.stdout)["detectors"]}
-    assert set(rep) == {"kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1"}
+    out = json.loads(r.stdout)
+    rep = {d["id"]: d for d in out["detectors"]}
+    assert set(rep) == {"kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1",
+                        "kinematic-flow-angles-v1"}
+    assert out["identical_to_log"] == {k: True for k in rep}
     for ident in ("kalman-gust-v1", "kinematic-attitude-v1"):
         d = rep[ident]
         (f,) = d["faults"]
