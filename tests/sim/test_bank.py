@@ -40,7 +40,7 @@ def test_gyro_bias_is_detected_isolated_and_logged(gyro_run):
     s = gyro_run.summary
     assert gyro_run.status == "completed"
     assert s.fdi_detectors == ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1",
-                               "kinematic-airspeed-v1")
+                               "kinematic-airspeed-v1", "kinematic-flow-angles-v1")
     found = {d.detector: d for d in s.fdi_detections}
     att = found["kinematic-attitude-v1"]
     assert att.detected_t_s is not None and 0.0 < att.delay_s < 3.0 and att.isolation == "q_radps"
