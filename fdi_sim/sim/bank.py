@@ -224,6 +224,9 @@ class _Member:
             self.nu = np.empty((S, len(self.residual_names)))
         self.decision = decision
         self.angle_rule = decision.rule == "angle-magnitude"
+        # a check that compares one sensor group with an independent one (gyros with the AHRS,
+        # baro and pitot with GNSS); the flow-angle check leans on the pitot and the AHRS as well
+        self.direct = kind == "kinematic" and getattr(stream, "kind", "") != "flow-angles"
         self.keep = False
         if kind == "gust":
             self.u = np.empty((S, len(self.in_cols)))
@@ -601,12 +604,14 @@ class FdiBank:
         """Correct a sensor once a kinematic check (exact kinematics, no model) or two members have
         confirmed it, if the pilot reads it and a filter can estimate it. The gust filter alone does
         not suffice: it confuses a pitch-gyro bias with a pitch-attitude bias (the attitude is the
-        gyro's integral), and acting on the wrong one would remove a good sensor."""
+        gyro's integral), and acting on the wrong one would remove a good sensor. Nor does the
+        flow-angle check alone: it computes alpha and beta from the pitot airspeed and the attitude,
+        so a drifting airspeed makes it name the alpha vane (measured on the DHC-6 pitot drift)."""
         if name in self._corrected or name not in self.pilot_sensors or self._estimator(name) is None:
             return False
         by = self._confirmed.get(name, set())
-        kinds = {m.kind for m in self.members if m.id in by}
-        return "kinematic" in kinds or len(by) >= 2
+        direct = any(m.kind == "kinematic" and m.id in by and m.direct for m in self.members)
+        return direct or len(by) >= 2
 
     def _reconfigure_sensor(self, name: str, t_s: float) -> None:
         m = self._estimator(name)
