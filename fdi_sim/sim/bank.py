@@ -43,6 +43,10 @@ from numpy.typing import NDArray
 from fdi_sim.decision.failure_log import FailureLogger
 from fdi_sim.errors import DesignError
 
+#: the commands an actuator reconfiguration can rescale, in the loop's write order
+ACTUATOR_INPUTS = ("elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm", "throttle_cmd_norm")
+#: the largest rescale (an effectiveness estimate below 1/3 is not made up: the stops would cut it)
+MAX_COMMAND_SCALE = 3.0
 #: topics of the bank (beside the per-detector ``/fdi/<id>/...``)
 TOPIC_FDI_RECONFIG = "/fdi/reconfiguration"
 
@@ -273,6 +277,7 @@ class _Member:
         if self.kind == "gust":
             u = self.u[:S]
             _take_cols(u_avg, self.in_cols, u)
+            self.j_start = int(self.stream._st[0])  # the gain index of the block's first sample
             self.stream.process(u, y, ok, stat, thr, val, hyp, self.cos[:S], self.point[:S], nu, self.yhat[:S])
         else:
             thr[:] = self.stream.threshold
@@ -394,6 +399,8 @@ class FdiBank:
         self.corrections: list[Correction] = []
         self._corrected: set[str] = set()
         self._confirmed: dict[str, set[str]] = {}
+        self._estimators: dict[str, tuple[_Member, Any, float]] = {}  # actuator -> (member, estimator, start)
+        self.command_scale: tuple[float, float, float, float] | None = None
         self.failure_events: list[dict[str, Any]] = []
         self.reconfig_events: list[dict[str, Any]] = []
 
@@ -520,6 +527,8 @@ class FdiBank:
             changed = self._events(t, S)
         if self.corrections:
             self._update_corrections(meas, S)
+        if self._estimators and self._update_estimators(t, S):
+            changed = True
         if self._writer is not None:
             self._log(t, S)
         self.samples_done += S
@@ -555,6 +564,9 @@ class FdiBank:
                         if self._should_correct(name):
                             self._reconfigure_sensor(name, float(t[j]))
                             changed = True
+                        elif (m.kind == "gust" and name in ACTUATOR_INPUTS and name in m.stream.input_names
+                              and name not in self._estimators):
+                            self._start_estimator(m, name, float(t[j]))
                 m.was_on = on
         for j in range(S):
             if not np.array_equal(sig_rows[j], self._sig):
@@ -626,6 +638,37 @@ class FdiBank:
         if self._ch_reconf is not None:
             self._ch_reconf.write(t_s, ev)
 
+    def _start_estimator(self, m: _Member, name: str, t_s: float) -> None:
+        """An actuator confirmed by a filter: estimate its effectiveness from the next block on."""
+        from fdi_sim.detectors.effectiveness import EffectivenessEstimator
+
+        self._estimators[name] = (m, EffectivenessEstimator(m.stream, name), t_s)
+        self._estimating_since = t_s
+
+    def _update_estimators(self, t: NDArray[np.float64], S: int) -> bool:
+        """Feed the effectiveness estimators; rescale a command once its estimate allows it (latched:
+        after the rescale the delivered deflection is no longer the estimator's model)."""
+        changed = False
+        for name, (m, est, t0) in list(self._estimators.items()):
+            if est is None:
+                continue
+            est.update(m.u[:S], m.nu[:S], m.point[:S], m.j_start)
+            if est.usable():
+                e, sd, _ = est.estimate
+                scale = list(self.command_scale or (1.0, 1.0, 1.0, 1.0))
+                i = ACTUATOR_INPUTS.index(name)
+                scale[i] = min(MAX_COMMAND_SCALE, 1.0 / e)
+                self.command_scale = tuple(scale)
+                ev = {"action": "rescale-command", "sensor": name, "detector": m.id, "t_s": float(t[S - 1]),
+                      "effectiveness": float(e), "effectiveness_std": float(sd), "scale": scale[i],
+                      "confirmed_by": m.id}
+                self.reconfig_events.append(ev)
+                if self._ch_reconf is not None:
+                    self._ch_reconf.write(float(t[S - 1]), ev)
+                self._estimators[name] = (m, None, t0)
+                changed = True
+        return changed
+
     def _update_corrections(self, meas: NDArray[np.float64], S: int) -> None:
         """``f_hat = mean(y - y_hat)`` over the block's fresh samples, per corrected sensor (the filter
         no longer uses the sensor, so ``y_hat`` is its estimate from the others)."""
@@ -674,6 +717,9 @@ RECONFIG_JSON_SCHEMA: dict[str, Any] = {
         "detector": {"type": "string", "description": "the detector whose isolation triggered it"},
         "t_s": {"type": "number", "description": "time of the isolated sample [s]"},
         "confirmed_by": {"type": "string", "description": "the members that confirmed the isolation"},
+        "effectiveness": {"type": "number", "description": "estimated actuator effectiveness [-]"},
+        "effectiveness_std": {"type": "number", "description": "its standard deviation [-]"},
+        "scale": {"type": "number", "description": "the factor the command is multiplied by [-]"},
     },
 }
 

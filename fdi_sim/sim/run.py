@@ -194,7 +194,9 @@ class RunSummary:
                     lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} detected at "
                                  f"{d.detected_t_s:.2f} s (delay {d.delay_s:.2f} s), isolated as {iso}{mark}")
             for r in self.fdi_reconfigurations:
-                lines.append(f"  reconfigured {r['sensor']} at {r['t_s']:.2f} s ({r['action']}, by {r['detector']})")
+                extra = (f", effectiveness {r['effectiveness']:.2f} +- {r['effectiveness_std']:.2f}, command x "
+                         f"{r['scale']:.2f}" if "scale" in r else "")
+                lines.append(f"  reconfigured {r['sensor']} at {r['t_s']:.2f} s ({r['action']}, by {r['detector']}{extra})")
             if self.fdi_false_alarms:
                 for a in self.fdi_false_alarms:
                     end = "open" if a.end_t_s is None else f"to {a.end_t_s:.2f} s"
@@ -550,6 +552,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
         cmd_rows = meas_rows = valid_rows = None
     next_sample = n_fdi
     corrected = False
+    scale = None  # the bank's command rescale (elevator, aileron, rudder, throttle), once it sets one
     has_dropout = inj is not None and inj.has_dropout
     try:
         for k in range(n_steps + 1):
@@ -587,17 +590,22 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 if has_dropout:
                     valid_rows[jb] = inj.valid
                 next_sample += n_fdi
-                if k % K == 0:
-                    if bank.end_block(k, dt):
-                        corrected = True
+                if k % K == 0 and bank.end_block(k, dt):  # the bank reconfigured: from this step on
+                    corrected, scale = bool(bank.corrections), bank.command_scale
             y_pilot = bank.pilot_input(y) if corrected else y
             if inj is None:
                 pilot_into(t_s, y_pilot, u_arr)
                 el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = u_arr.tolist()
-                write_cmd(el, ai, ru, th)
+                if scale is None:
+                    write_cmd(el, ai, ru, th)
+                else:  # an actuator's lost effectiveness made up (the log keeps the pilot's command)
+                    write_cmd(el * scale[0], ai * scale[1], ru * scale[2], th * scale[3])
             else:  # faults: sensors -> pilot -> commands -> plant (surfaces, engines, icing)
                 _, el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = pilot.step(t_s, y_pilot)
-                write_cmd(*inj.commands(t_s, el, ai, ru, th))
+                if scale is None:
+                    write_cmd(*inj.commands(t_s, el, ai, ru, th))
+                else:
+                    write_cmd(*inj.commands(t_s, el * scale[0], ai * scale[1], ru * scale[2], th * scale[3]))
                 inj.after_commands()
                 inj.plant(t_s, xl)
                 eta = inj.icing_eta
