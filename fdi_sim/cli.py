@@ -94,6 +94,12 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     from fdi_sim.sim.detect import DEFAULT_RATE_HZ, SCENARIO_BANK, bank_specs, detect_log, parse_detector_arg, replay_bank
 
     if args.bank in (SCENARIO_BANK, "default") and not args.detector:
+        if args.out or args.rate_hz:
+            from fdi_sim.errors import ScenarioError
+
+            raise ScenarioError("--bank", args.bank, "an in-loop bank replays at its own rate into the report; --out "
+                                "and --rate-hz do not apply", "leave them out, or give --detector for offline "
+                                "detectors")
         rep, same = replay_bank(args.log, None if args.bank == SCENARIO_BANK else "default")
         if args.json:
             print(json.dumps({**json.loads(rep.to_json()), "identical_to_log": same}, indent=1))

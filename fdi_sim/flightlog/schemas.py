@@ -296,7 +296,10 @@ FAILURE_LOG_JSON_SCHEMA: dict[str, Any] = _object_schema(
     detector=_DETECTOR_ID,
     onset_t_s={"type": "number", "description": "time of occurrence [s]"},
     duration_s={"type": ["number", "null"], "description": "duration [s], null while active"},
-    kind={"type": "string", "description": "nature of the failure"},
+    kind={"type": "string", "description": "what failed: sensor, or actuator (name)"},
+    nature={"type": "string", "description": "persistent, or intermittent (more than one onset so far)"},
+    event={"type": "string", "description": "onset or end"},
+    ongoing={"type": "boolean", "description": "the entry was still on when the flight ended"},
 )
 
 #: ``/sim/status``: run status (start, trim done, end, diverged)

@@ -11,8 +11,8 @@ and the reconfiguration, and writes the ``/fdi`` topics. A decision about sample
 *acted on* (reconfiguration) at the end of its block, at most ``block_s`` after ``t_j``; its time
 stamp is ``t_j``. Replaying a log (:meth:`FdiBank.replay`) feeds the logged rows through the same
 functions, and every kernel is invariant to how samples are cut into blocks, so in-loop and replay
-agree bit for bit (runs without reconfiguration: with it, the pilot's input differs from the log's
-measurements, and the log says what was replaced).
+agree bit for bit, with reconfiguration too (the bank reads the logged sensor measurements and the
+logged pilot commands; what it replaced for the pilot is in ``/fdi/reconfiguration``).
 
 Decision (per member): the sample's *exceedance* is ``valid and statistic > threshold``; the
 alarm is k-of-n persistence over the exceedances (``k = n = 1``: the exceedance itself). While an
@@ -21,7 +21,8 @@ most votes so far (first to reach it on a tie), confirmed after ``confirm_sample
 
 Failure log (Miller & Ribbens, FIG. 4): one binary signal per hypothesis, on while some member's
 alarm is isolated to it; its rising and falling edges are the events of ``/fdi/failure_log``
-(onset, end, duration, nature: a hypothesis with a second onset is intermittent).
+(onset, end, duration, kind, nature: a hypothesis with a second onset is intermittent); an entry
+still on at the end of the flight gets an ``ongoing`` end event (:meth:`FdiBank.close`).
 
 Reconfiguration (FIG. 2, signal G), when a member with estimates (kalman-gust) confirms a sensor:
 the sensor is excluded from the filter's measurement update (latched: a failed sensor is not
@@ -100,12 +101,12 @@ def _stat_rows(stat, thr, exceed, alarm, valid, iso, point, out):  # pragma: no 
 
 
 @numba.njit(cache=True, nogil=True)
-def _decide(stat, thr, valid, hyp, k, need_direction, ring, st, votes, exceed, alarm, iso):  # pragma: no cover
+def _decide(stat, thr, valid, hyp, k, need_direction, ring, st, votes, exceed, alarm, iso, lead):  # pragma: no cover
     """k-of-n persistence and the isolation vote, carried across blocks.
 
     ``ring`` (n,) last exceedances; ``st`` = [ring position, count, alarm on, leader, leader votes,
     an alarm in this call];
-    ``votes`` (H,) votes of the current alarm. With ``need_direction`` (the two-step rule) a sample
+    ``votes`` (H,) votes of the current alarm; ``lead`` gets the leader's votes at each sample. With ``need_direction`` (the two-step rule) a sample
     exceeds only if its residual is also within the angle bound of some fault direction
     (``hyp >= 0``: the detector's cosine test passed)."""
     n = ring.shape[0]
@@ -136,6 +137,7 @@ def _decide(stat, thr, valid, hyp, k, need_direction, ring, st, votes, exceed, a
             st[5] = 1
         alarm[j] = on
         iso[j] = st[3] if on else -1
+        lead[j] = st[4] if on else 0
 
 
 @dataclass(frozen=True)
@@ -213,6 +215,7 @@ class _Member:
         self.iso = np.empty(S, dtype=np.int64)
         self.point = np.zeros(S, dtype=np.int64)
         self.rows = np.empty((S, 7))  # the statistic topic's rows (STAT_FIELDS after t_s)
+        self.lead = np.zeros(S, dtype=np.int64)  # the isolation leader's votes per sample
         self.full_S = S
         if kind == "gust":
             missing = [nm for nm in stream.input_names if nm not in cmd_names]
@@ -284,7 +287,8 @@ class _Member:
             self.stream.process(t[:S], y, ok, fresh, stat, val, hyp, nu)
         if unarmed:  # before the bank is armed the statistic is logged, never decided on
             val[:unarmed] = False
-        _decide(stat, thr, val, hyp, self.decision.k, self.angle_rule, self.ring, self.st, self.votes, ex, al, iso)
+        _decide(stat, thr, val, hyp, self.decision.k, self.angle_rule, self.ring, self.st, self.votes, ex, al, iso,
+                self.lead[:S])
         if self.keep:
             for k in TRACE_FIELDS:
                 self.trace[k].append(getattr(self, TRACE_ATTR[k])[:S].copy())
@@ -393,6 +397,7 @@ class FdiBank:
         self.valid_rows[:] = True
         self.failure_log = FailureLogger(self.hypotheses)
         self._sig = np.zeros(len(self.hypotheses), dtype=np.bool_)
+        self._onsets = np.zeros(len(self.hypotheses), dtype=np.int64)
         self._sig_detectors: list[set[str]] = [set() for _ in self.hypotheses]
         self.alarms: list[BankAlarm] = []
         self._open: dict[str, int] = {}
@@ -551,6 +556,8 @@ class FdiBank:
                     self.alarms.append(BankAlarm(m.id, float(t[j]), None, None))
                 elif not on and m.was_on:
                     self._alarm_event(m, float(t[j]), False, j)
+                    for by in self._confirmed.values():  # a confirmation lasts as long as its alarm
+                        by.discard(m.id)
                     i = self._open.pop(m.id)
                     self.alarms[i] = BankAlarm(m.id, self.alarms[i].onset_t_s, float(t[j]), self.alarms[i].isolation)
                 if on and iso[j] >= 0:
@@ -559,7 +566,7 @@ class FdiBank:
                     if self.alarms[i].isolation != name:
                         self.alarms[i] = BankAlarm(m.id, self.alarms[i].onset_t_s, None, name)
                         self._alarm_event(m, float(t[j]), True, j, isolated=True)
-                    if self.reconfigure and m.st[4] >= self.decision.confirm_samples:
+                    if self.reconfigure and m.lead[j] >= self.decision.confirm_samples:  # votes at sample j
                         self._confirmed.setdefault(name, set()).add(m.id)
                         if self._should_correct(name):
                             self._reconfigure_sensor(name, float(t[j]))
@@ -576,13 +583,14 @@ class FdiBank:
                         dets = sorted(m.id for mi, m in enumerate(self.members)
                                       if m.alarm[j] and m.iso[j] >= 0 and m.hypotheses[m.iso[j]] == name)
                         self._sig_detectors[h] = set(dets)
+                        self._onsets[h] += 1
                         ev = {"event": "onset", "hypothesis": name, "onset_t_s": float(t[j]), "duration_s": None,
-                              "kind": self._kind(name), "detector": ",".join(dets)}
+                              "kind": self._kind(name), "detector": ",".join(dets), "nature": self._nature(h)}
                     else:
                         onset = self.failure_log._onset[h]
                         ev = {"event": "end", "hypothesis": name, "onset_t_s": float(onset),
                               "duration_s": float(t[j]) - float(onset), "kind": self._kind(name),
-                              "detector": ",".join(sorted(self._sig_detectors[h]))}
+                              "detector": ",".join(sorted(self._sig_detectors[h])), "nature": self._nature(h)}
                     self.failure_events.append({"t_s": float(t[j]), **ev})
                     if self._writer is not None:
                         self._ch_flog.write(float(t[j]), ev)
@@ -602,6 +610,22 @@ class FdiBank:
         if isolated:
             ev["event"] = "isolated"
         self._ch_alarms.write(t_s, ev)
+
+    def _nature(self, h: int) -> str:
+        """Persistent, or intermittent once the hypothesis has had a second onset (as known so far)."""
+        return "intermittent" if self._onsets[h] > 1 else "persistent"
+
+    def close(self, t_s: float) -> None:
+        """The end of the flight at ``t_s`` [s]: every failure-log entry still on gets its end
+        (``ongoing``) event, so the log says how long each lasted."""
+        for h in np.flatnonzero(self._sig):
+            onset = float(self.failure_log._onset[h])
+            ev = {"event": "end", "hypothesis": self.hypotheses[h], "onset_t_s": onset, "duration_s": t_s - onset,
+                  "kind": self._kind(self.hypotheses[h]), "detector": ",".join(sorted(self._sig_detectors[h])),
+                  "nature": self._nature(h), "ongoing": True}
+            self.failure_events.append({"t_s": t_s, **ev})
+            if self._writer is not None:
+                self._ch_flog.write(t_s, ev)
 
     def _kind(self, name: str) -> str:
         if name.endswith("_cmd_norm"):

@@ -290,6 +290,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
     for mem, r in zip(bank.members, rec["members"]):
         mem.set_threshold(float(r["threshold"]))
     bank.calibration = rec
+    bank.keep_trace(False)  # the replays kept every block; a flight must not
     bank.reset()
     return rec
 
@@ -329,7 +330,6 @@ def bank_for_log(log: Any, *, progress: bool = False, bank: str | None = None) -
     from fdi_sim.errors import LogError
     from fdi_sim.flightlog import METADATA_SCENARIO, TOPIC_COMMANDS, TOPIC_SENSORS
     from fdi_sim.scenario.loader import from_dict
-    from fdi_sim.sensors import load_suite
 
     meta = log.metadata.get(METADATA_SCENARIO)
     if not meta or "json" not in meta:
@@ -347,7 +347,9 @@ def bank_for_log(log: Any, *, progress: bool = False, bank: str | None = None) -
                            "replayed: its FDI topics are the record)")
     meas_names = tuple(f for f in log.topics[TOPIC_SENSORS].fields if f != "t_s")
     cmd_names = tuple(f for f in log.topics[TOPIC_COMMANDS].fields if f != "t_s")
-    suite = load_suite(sc.aircraft, sc.model.sensors.suite)
+    from fdi_sim.sim.run import build_sensors
+
+    suite = build_sensors(sc, sc.dt_s).specs  # the scenario's overrides too (a rate changes the freshness)
     return build_bank(sc, meas_names=meas_names, cmd_names=cmd_names,
                       sensor_rates_hz={s.name: s.rate_hz for s in suite}, pilot_sensors=meas_names, progress=progress)
 

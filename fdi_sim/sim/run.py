@@ -266,10 +266,10 @@ def build_loop_bank(sc: Scenario, sensors: SensorSuite, progress: bool | None) -
 def bank_metadata(bank: FdiBank) -> dict[str, str]:
     """The bank as strings for the log's metadata (what a replay and a reviewer need)."""
     members = [{"id": m.id, "kind": m.kind, "hypotheses": list(m.hypotheses), "outputs": list(m.output_names),
-                "residuals": list(m.residual_names), "threshold": float(m.thr[0]) if m.kind != "gust" else
+                "residuals": list(m.residual_names), "threshold": float(m.stream.threshold) if m.kind != "gust" else
                 float(m.stream._thr[0])} for m in bank.members]
     return {"members": json.dumps(members), "rate_hz": f"{bank.rate_hz:g}", "block_samples": str(bank.S),
-            "decision": json.dumps({"k": bank.decision.k, "n": bank.decision.n,
+            "decision": json.dumps({"rule": bank.decision.rule, "k": bank.decision.k, "n": bank.decision.n,
                                     "confirm_samples": bank.decision.confirm_samples}),
             "reconfigure": json.dumps(bank.reconfigure), "notes": json.dumps(list(bank.notes)),
             "calibration": json.dumps(getattr(bank, "calibration", None))}
@@ -656,6 +656,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
         if bank is not None and steps:
             # the partial last block: samples whose step completed (the replay of the log sees the same)
             bank.flush(steps - 1, dt)
+            bank.close((steps - 1) * dt)
     return status, reason, t_s, np.array([max_dh, max_dv, max_dphi]), steps
 
 

@@ -93,7 +93,8 @@ def compare(name: str = "f16_climb_accelerate", seeds: Sequence[int] = HELD_OUT_
                 val[: int(5.0 * s.rate_hz)] = False  # armed after 5 s, as the bank
                 ex, al, iso = np.empty(N, np.bool_), np.empty(N, np.bool_), np.empty(N, np.int64)
                 _decide(T, thr, val, hyp, dec.k, False, np.zeros(dec.n, np.int64),
-                        np.array([0, 0, 0, -1, 0, 0], np.int64), np.zeros(len(st.hypotheses), np.int64), ex, al, iso)
+                        np.array([0, 0, 0, -1, 0, 0], np.int64), np.zeros(len(st.hypotheses), np.int64), ex, al, iso,
+                        np.empty(N, np.int64))
                 counts[key][0] += int(np.count_nonzero(al[1:] & ~al[:-1]) + al[0])
                 counts[key][1] += int(ex.sum())
                 if key == "scheduled":

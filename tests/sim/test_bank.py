@@ -95,7 +95,6 @@ def test_monte_carlo_log_holds_only_the_fdi_topics(tmp_path):
     assert res.summary.steps == 7201
     assert not any(t.startswith(("/truth", "/sensors", "/commands", "/surfaces")) for t in log.topics)
     assert "/fdi/kinematic-attitude-v1/statistic" in log.topics and "/sim/status" in log.topics
-    assert res.summary.fdi_detections == pytest.approx(res.summary.fdi_detections)  # same flight, same bank
     full = _with_bank("f16_pitch_gyro_bias.toml", reconfigure=False)
     res_full = run(full, tmp_path / "full", progress=False)
     a, b = read_log(res.log_path), read_log(res_full.log_path)
@@ -152,7 +151,7 @@ def test_a_decision_rule_that_needs_fault_directions(tmp_path, f16_text):
     sc = loads(f16_text + '[fdi]\nbank = "default"\ndecision = "angle-magnitude"\n')
     with pytest.raises(ScenarioError, match="fault directions"):
         run(sc, tmp_path, progress=False)
-    assert not list(tmp_path.glob("*.mcap"))
+    assert not list(tmp_path.iterdir())  # no log, and no temporary one either
 
 
 def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
@@ -175,10 +174,12 @@ def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
     def go(blocks):
         ring, st, votes = np.zeros(n, np.int64), np.array([0, 0, 0, -1, 0, 0], np.int64), np.zeros(1, np.int64)
         ex, al, iso = np.empty(N, np.bool_), np.empty(N, np.bool_), np.empty(N, np.int64)
+        lead = np.empty(N, np.int64)
         i = 0
         for b in blocks:
             sl = slice(i, min(N, i + int(b)))
-            _decide(stat[sl], thr[sl], valid[sl], hyp[sl], k, False, ring, st, votes, ex[sl], al[sl], iso[sl])
+            _decide(stat[sl], thr[sl], valid[sl], hyp[sl], k, False, ring, st, votes, ex[sl], al[sl], iso[sl],
+                    lead[sl])
             i += int(b)
         return ex, al, iso
 
