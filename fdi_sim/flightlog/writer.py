@@ -680,21 +680,29 @@ class FlightLogWriter:
             return self._write_pending_now()
 
     def _write_pending_now(self) -> float | None:
-        blocks: list[VectorBlock] = []
-        # channels written at every step hold equal times: convert them once and share the
-        # array, which also lets build_chunk recognise the regular layout by identity
-        times: list[float] | None = None
-        t_s = np.zeros(0)
+        # channels written at the same times form a group: their times are converted once and
+        # shared, which lets build_chunk recognise the regular layout by identity. Each group is
+        # its own chunk (the 120 Hz topics and a 20 Hz detector bank would otherwise share one
+        # irregular chunk and take the general layout, 3-4 times slower); every channel stays in
+        # one chunk per flush, so its messages stay in time order.
+        groups: list[tuple[list[float], NDArray[np.float64], list[VectorBlock]]] = []
         for ch in self._vector:
             if ch._t:
-                if ch._t != times:
-                    times, t_s = ch._t, np.array(ch._t, dtype=np.float64)
+                for times, t_s, blocks in groups:
+                    if ch._t == times:
+                        break
+                else:
+                    times, t_s, blocks = ch._t, np.array(ch._t, dtype=np.float64), []
+                    groups.append((times, t_s, blocks))
                 blocks.append(ch._take(t_s))
         raws, self._pending_raw = self._pending_raw, []
         t_max = None
-        if blocks or raws:
-            payload = build_chunk(blocks, raws)
-            t_max = payload.message_end_ns / NS_PER_S
+        if not groups and raws:
+            groups = [([], np.zeros(0), [])]
+        for i, (_, _, blocks) in enumerate(groups):
+            payload = build_chunk(blocks, raws if i == 0 else ())  # the events with the first group
+            end = payload.message_end_ns / NS_PER_S
+            t_max = end if t_max is None else max(t_max, end)
             self._io(self._file.write_chunk, payload)
         self._io(self._file.flush)
         return t_max

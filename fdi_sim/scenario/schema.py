@@ -78,7 +78,7 @@ class FdiSection(_Section):
 
     bank: Literal["none", "default"] = Field(default="none", description="named bank (per aircraft) or none")
     rate_hz: float = Field(default=20.0, gt=0.0, le=240.0, description="detector rate [Hz]; divides rate_hz")
-    block_s: float = Field(default=0.25, gt=0.0, le=5.0, description="the bank runs every block_s [s]")
+    block_s: float = Field(default=0.5, gt=0.0, le=5.0, description="the bank runs every block_s [s]")
     far_per_h: float = Field(default=0.1, gt=0.0, lt=1.0,
                              description="design false-alarm rate of the whole bank [1/flight hour], in (0, 1)")
     decision: Literal["persistence", "angle-magnitude"] = Field(
@@ -106,7 +106,7 @@ class LogSection(_Section):
     """What the log holds."""
 
     per_step: bool = Field(default=True, description="the 120 Hz topics (truth, sensors, commands...); "
-                           "false keeps only the FDI topics, as a Monte Carlo run would")
+                           "false keeps only the FDI topics, as a Monte Carlo run would (flushed every 10 s)")
 
 
 class ScenarioModel(_Section):

@@ -33,6 +33,7 @@ h_ft = {h}
 turbulence = "moderate"
 [fdi]
 bank = "{bank}"
+block_s = {block_s}
 [log]
 per_step = {per_step}
 """
@@ -52,9 +53,9 @@ def bare_rate(ac_name: str, sc, T: float) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def scenario(ac: str, T: float, bank: str, per_step: bool):
+def scenario(ac: str, T: float, bank: str, per_step: bool, block_s: float = 0.5):
     h, speed = CASES[ac]
-    return loads(SC.format(ac=ac, T=T, h=h, speed=speed, bank=bank, per_step=str(per_step).lower()))
+    return loads(SC.format(ac=ac, T=T, h=h, speed=speed, bank=bank, per_step=str(per_step).lower(), block_s=block_s))
 
 
 def loop_rate(sc, d: str) -> float:
@@ -63,19 +64,20 @@ def loop_rate(sc, d: str) -> float:
 
 
 def main(T: float = 120.0, repeats: int = 3) -> None:
-    print(f"{'aircraft':8} {'log':10} {'bank':8} {'bare steps/s':>13} {'loop steps/s':>13} {'ratio':>6} "
+    print(f"{'aircraft':8} {'log':10} {'bank':8} {'block s':>7} {'bare steps/s':>13} {'loop steps/s':>13} {'ratio':>6} "
           f"{'overhead us/step':>17}")
     with tempfile.TemporaryDirectory() as d:
         for ac in CASES:
-            for bank, per_step in (("none", True), ("default", True), ("none", False), ("default", False)):
-                sc = scenario(ac, T, bank, per_step)
-                run(scenario(ac, 2.0, bank, per_step), d, progress=False, force=True)  # designs, numba compile
+            for bank, per_step, block in (("none", True, 0.5), ("default", True, 0.5), ("none", False, 0.5),
+                                          ("default", False, 0.5), ("default", False, 1.0)):
+                sc = scenario(ac, T, bank, per_step, block)
+                run(scenario(ac, 2.0, bank, per_step, block), d, progress=False, force=True)  # designs, compile
                 bare, loop = [], []
                 for _ in range(repeats):  # interleaved so that machine load hits both alike
                     bare.append(bare_rate(ac, sc, T))
                     loop.append(loop_rate(sc, d))
                 b, lp = max(bare), max(loop)
-                print(f"{ac:8} {'full' if per_step else 'fdi only':10} {bank:8} {b:13.0f} {lp:13.0f} {lp / b:6.2f} "
+                print(f"{ac:8} {'full' if per_step else 'fdi only':10} {bank:8} {block:7g} {b:13.0f} {lp:13.0f} {lp / b:6.2f} "
                       f"{1e6 / lp - 1e6 / b:17.1f}", flush=True)
         for ac in CASES:
             sc = scenario(ac, T, "default", True)
