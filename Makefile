@@ -28,7 +28,7 @@ $(NODE_TOOLS): tools/foxglove/package-lock.json
 node-tools: $(NODE_TOOLS)
 
 test: $(STAMP) node-tools  ## the default suite (under 15 min); long studies are marked slow
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n 2 --dist loadfile tests  # two workers (CI has 2 cores); a file stays on one worker (module fixtures)
 
 test-slow: $(STAMP)  ## only the long studies and reproductions
 	$(PY) -m pytest -q -m slow tests
