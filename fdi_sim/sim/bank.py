@@ -5,7 +5,7 @@ step ``k = j n`` (``n = sim_rate / rate``), with the measurement read at the top
 the commands averaged over steps ``(j-1) n .. j n - 1`` (the interval ending at ``t_j``). The loop
 hands the bank, per step, the command row of that step (:attr:`FdiBank.cmd_rows`, a ring of one
 block) and, at every sample step, the measurement row (:attr:`FdiBank.meas_rows`); every
-``block_samples`` samples (``block_s``, 0.25 s by default) it calls :meth:`FdiBank.end_block`,
+``block_samples`` samples (``block_s``, 0.5 s by default) it calls :meth:`FdiBank.end_block`,
 which runs every member's compiled kernel once over the block, the decision rule, the failure log
 and the reconfiguration, and writes the ``/fdi`` topics. A decision about sample ``j`` is therefore
 *acted on* (reconfiguration) at the end of its block, at most ``block_s`` after ``t_j``; its time
