@@ -4,7 +4,8 @@ Per detector sample ``j`` (the time convention of :mod:`fdi_sim.detectors.sample
 command averaged over the interval ending at ``t_j``, ``y_j`` measured at ``t_j``), with the active
 schedule point ``c`` (:mod:`fdi_sim.detectors.scheduled`)::
 
-    schedule s_j = s_{j-1} + (y_s,j - s_{j-1}) / (tau rate)      (measured h, vc, low-passed)
+    schedule s_j = s_{j-1} + (y_s,j - s_{j-1}) / (tau rate)      (measured h, vc, low-passed; a
+             missing or excluded one replaced by the filter's last prediction of it)
     switch   i = argmin_i d_i(s_j);  if d_c - d_i > hysteresis:  x += x0_c - x0_i,  c = i
     predict  yhat_j = y0_c + C_c x + D_c (u_j - u0_c)
     innovate nu_j = y_j - yhat_j          (0 for a missing or excluded measurement)
@@ -58,32 +59,29 @@ def _process(A, B, C, D, G, u0, y0, x0, L, Si_g, g_Si_g, Si, thr, points, spacin
         c = st[1]
         # --- schedule: nearest point with hysteresis, bumpless transfer ---------------------
         if P > 1:
-            okall = True
-            for s in range(S):
-                if not ok[j, i_sched[s]]:
-                    okall = False
-            if okall:
-                for s in range(S):  # first-order low pass: turbulence moves vc by ~5 kt rms
-                    s_f[s] += a_sched * (y[j, i_sched[s]] - s_f[s])
-                best = 0
-                dbest = 1e300
-                dc = 0.0
-                for i in range(P):
-                    d2 = 0.0
-                    for s in range(S):
-                        e = (s_f[s] - points[i, s]) / spacing[s]
-                        d2 += e * e
-                    d = math.sqrt(d2)
-                    if d < dbest:
-                        dbest = d
-                        best = i
-                    if i == c:
-                        dc = d
-                if best != c and dc - dbest > hyst:
-                    for a in range(n):
-                        x[a] += x0[c, a] - x0[best, a]
-                    c = best
-                    st[1] = c
+            for s in range(S):  # first-order low pass: turbulence moves vc by ~5 kt rms
+                # a missing or excluded scheduling sensor is replaced by the filter's last prediction
+                v = y[j, i_sched[s]] if ok[j, i_sched[s]] else s_f[S + s]
+                s_f[s] += a_sched * (v - s_f[s])
+            best = 0
+            dbest = 1e300
+            dc = 0.0
+            for i in range(P):
+                d2 = 0.0
+                for s in range(S):
+                    e = (s_f[s] - points[i, s]) / spacing[s]
+                    d2 += e * e
+                d = math.sqrt(d2)
+                if d < dbest:
+                    dbest = d
+                    best = i
+                if i == c:
+                    dc = d
+            if best != c and dc - dbest > hyst:
+                for a in range(n):
+                    x[a] += x0[c, a] - x0[best, a]
+                c = best
+                st[1] = c
         # --- filter --------------------------------------------------------------------------
         for b in range(mc):
             du[b] = u[j, b] - u0[c, b]
@@ -96,6 +94,9 @@ def _process(A, B, C, D, G, u0, y0, x0, L, Si_g, g_Si_g, Si, thr, points, spacin
             for b in range(mc):
                 pred += D[c, r, b] * du[b]
             out_yhat[j, r] = y0[c, r] + pred
+            for s in range(S):
+                if i_sched[s] == r:
+                    s_f[S + s] = y0[c, r] + pred  # the prediction a later sample may schedule on
             if ok[j, r]:
                 dy = y[j, r] - y0[c, r]
                 if wrap[r]:
@@ -249,12 +250,13 @@ class GustKalmanStream:
         self._x = np.zeros(n)
         self._buf = np.zeros((self.window_n, self.n_outputs))
         self._st = np.array([0, 0 if point is None else int(point), 0], dtype=np.int64)  # j, active point, alarm start
-        self._s_f = self.schedule.points[int(self._st[1])].astype(float).copy()  # the low-passed (h_ft, vc_kts)
+        pt = self.schedule.points[int(self._st[1])].astype(float)
+        self._s_f = np.concatenate([pt, pt])  # the low-passed (h_ft, vc_kts), then the last predictions
 
     def start_at(self, h_ft: float, vc_kts: float) -> None:
         """Reset at the point nearest the given scheduling values (the flight's start)."""
         self.reset(self.schedule.nearest((h_ft, vc_kts)))
-        self._s_f[:] = (h_ft, vc_kts)
+        self._s_f[:] = (h_ft, vc_kts, h_ft, vc_kts)
 
     @property
     def active_point(self) -> int:

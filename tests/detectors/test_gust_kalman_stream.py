@@ -108,3 +108,24 @@ def test_one_structure_is_required(flight):
 
 def load_dhc6():
     return load(ROOT / "scenarios" / "dhc6_cruise_doublets.toml")
+
+
+def test_schedule_follows_the_filter_when_the_scheduling_sensor_is_excluded(flight):
+    """An excluded (reconfigured) vc no longer freezes the schedule: the filter's own prediction
+    of vc schedules it (it keeps switching across a boundary at the median airspeed), and that
+    prediction follows the measured airspeed it no longer sees."""
+    det, s = flight
+    y = s.dy + s.y0
+    vc = y[:, list(det.design.model.output_names).index("vc_kts")]
+    h0 = float(np.median(y[:, list(det.design.model.output_names).index("h_ft")]))
+    two = GustKalmanSchedule(np.array([[h0, float(np.median(vc)) - 0.5], [h0, float(np.median(vc)) + 0.5]]),
+                             np.array([2000.0, 1.0]), (det.design,) * 2, (det.calibration,) * 2, hysteresis=0.2)
+    st = GustKalmanStream(two)
+    a = _go(st, s, [s.n])
+    i_vc = list(st.output_names).index("vc_kts")
+    s2 = replace(s, valid=s.valid.copy())
+    s2.valid[:, i_vc] = False
+    b = _go(st, s2, [s.n])
+    assert np.count_nonzero(np.diff(a["point"])) >= 1 and np.count_nonzero(np.diff(b["point"])) >= 1
+    err = b["yhat"][:, i_vc] - vc
+    assert np.sqrt(np.mean(err[40:] ** 2)) < 3.0, np.sqrt(np.mean(err[40:] ** 2))  # kt, after the filter's start
