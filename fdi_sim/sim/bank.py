@@ -406,7 +406,6 @@ class FdiBank:
         self._confirmed: dict[str, set[str]] = {}
         self._estimators: dict[str, tuple[_Member, Any, float]] = {}  # actuator -> (member, estimator, start)
         self.command_scale: tuple[float, float, float, float] | None = None
-        self.failure_events: list[dict[str, Any]] = []
         self.reconfig_events: list[dict[str, Any]] = []
 
     def keep_trace(self, keep: bool = True) -> None:
@@ -591,7 +590,6 @@ class FdiBank:
                         ev = {"event": "end", "hypothesis": name, "onset_t_s": float(onset),
                               "duration_s": float(t[j]) - float(onset), "kind": self._kind(name),
                               "detector": ",".join(sorted(self._sig_detectors[h])), "nature": self._nature(h)}
-                    self.failure_events.append({"t_s": float(t[j]), **ev})
                     if self._writer is not None:
                         self._ch_flog.write(float(t[j]), ev)
                 self.failure_log.step(float(t[j]), sig_rows[j])
@@ -623,7 +621,6 @@ class FdiBank:
             ev = {"event": "end", "hypothesis": self.hypotheses[h], "onset_t_s": onset, "duration_s": t_s - onset,
                   "kind": self._kind(self.hypotheses[h]), "detector": ",".join(sorted(self._sig_detectors[h])),
                   "nature": self._nature(h), "ongoing": True}
-            self.failure_events.append({"t_s": t_s, **ev})
             if self._writer is not None:
                 self._ch_flog.write(t_s, ev)
 
@@ -667,7 +664,6 @@ class FdiBank:
         from fdi_sim.detectors.effectiveness import EffectivenessEstimator
 
         self._estimators[name] = (m, EffectivenessEstimator(m.stream, name), t_s)
-        self._estimating_since = t_s
 
     def _update_estimators(self, t: NDArray[np.float64], S: int) -> bool:
         """Feed the effectiveness estimators; rescale a command once its estimate allows it (latched:

@@ -31,8 +31,8 @@ import numpy as np
 from fdi_sim import __version__, registry
 from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
+from fdi_sim.units import S_PER_H
 
-S_PER_H = 3600.0
 
 #: the detectors a new user gets, per aircraft (``docs/detectors.md``: the ones that work on it)
 #: (the flow-angle check watches the vanes, which nothing else isolates; in turbulence its threshold,
@@ -172,10 +172,10 @@ def _gust_stream(sc: Scenario, m: MemberSpec, *, progress: bool, training_logs: 
     cal_opts.update({k: v for k, v in m.params.items() if k in CALIBRATION_OPTIONS})
     design_opts = {k: v for k, v in m.params.items() if k not in CALIBRATION_OPTIONS + ("rate_hz", "min_cosine")}
     min_cos = float(m.params.get("min_cosine", 0.7))
-    points = _schedule_points(sc) if f.schedule == "auto" else []
-    if len(points) > 1:
-        from fdi_sim.sim.designs import design_schedule
+    from fdi_sim.sim.designs import design_schedule, schedule_points
 
+    points = schedule_points(sc) if f.schedule == "auto" else []
+    if len(points) > 1:
         sched = design_schedule(sc, points, rate_hz=f.rate_hz, params=design_opts, on_failure=f.on_design_failure,
                                 progress=progress, **cal_opts)
         note = f"{m.id}: gain-scheduled over {sched.n_points} points ({'; '.join(sched.label(i) for i in range(sched.n_points))})"
@@ -190,14 +190,6 @@ def _gust_stream(sc: Scenario, m: MemberSpec, *, progress: bool, training_logs: 
         sched = GustKalmanSchedule.single(det.design, det.calibration)
         note = f"{m.id}: one design at the initial point ({sched.label(0)})"
     return GustKalmanStream(sched, min_cosine=min_cos, id=m.id), note
-
-
-def _schedule_points(sc: Scenario) -> list[Any]:
-    try:
-        from fdi_sim.sim.designs import schedule_points
-    except ImportError:  # pragma: no cover - until the schedule designs exist
-        return []
-    return list(schedule_points(sc))
 
 
 def _kinematic_stream(sc: Scenario, m: MemberSpec) -> tuple[Any, str]:

@@ -26,20 +26,19 @@ from numpy.typing import NDArray
 from fdi_sim import registry
 from fdi_sim.detectors.samples import Samples, log_samples, paired_model
 from fdi_sim.errors import DesignError, FdiSimError, LogError, ScenarioError
+from fdi_sim.sim.bank_design import DEFAULT_BANKS
 from fdi_sim.flightlog import METADATA_SCENARIO, TOPIC_FAULT_EVENTS, fdi_topic, read_log
 from fdi_sim.flightlog.copy import NewEventTopic, NewVectorTopic, write_extended
 from fdi_sim.flightlog.reader import FlightLog
 from fdi_sim.flightlog.schemas import ALARM_JSON_SCHEMA, TOPIC_FDI_ALARMS
+from fdi_sim.units import S_PER_H
 
 DEFAULT_RATE_HZ = 20.0
-S_PER_H = 3600.0
 
 #: named banks: the detectors ``docs/detectors.md`` finds working on these aircraft (``--bank``).
 #: kalman-gust-v1 is calibrated on the log's own scenario (fault-free, 24 x 300 s, 1e-4 per sample);
 #: the kinematic checks carry their calibrated thresholds per aircraft and turbulence level.
-BANKS: dict[str, tuple[str, ...]] = {
-    "default": ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1"),
-}
+BANKS: dict[str, tuple[str, ...]] = {"default": DEFAULT_BANKS["f16"]}  # the same detectors on both aircraft
 
 
 #: ``--bank scenario``: replay the bank the log's own scenario defines (the in-loop bank)

@@ -449,11 +449,6 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     return RunResult(log_path=out, status=status, summary=summary)
 
 
-def _last_time(ch) -> float:
-    t = ch.last_t_s if ch is not None else None
-    return 0.0 if t is None else t
-
-
 def _discard(writer: FlightLogWriter | None, starting: Path, stop: StopRequest) -> None:
     """Drop the log of a run that never flew (the temporary file; nothing at the final path).
 
@@ -523,7 +518,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     measure_into, pilot_into = sensors.measure_into, pilot.step_into
     x_arr = np.empty(len(truth_signals(sc.aircraft)))
     y = np.empty(len(sensors.names))  # the measurements of the fast path (refilled each step)
-    u_arr = np.empty(8)  # the pilot's commands and references (refilled each step)
+    u_arr = np.empty(9)  # the pilot's commands and references (refilled each step), then the trim
     write_cmd = ac.command_writer()
     idx = {n: i for i, n in enumerate(truth_names)}
     i_h, i_vc, i_vt, i_phi, i_alpha, i_mach = idx["h_ft"], idx["vc_kts"], idx["vt_fps"], idx["phi_rad"], idx["alpha_rad"], idx["mach"]
@@ -539,6 +534,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     n_steps = int(round(sc.duration_s / dt))
     h_agl_node = ac.node("position/h-agl-ft").get_double_value
     pitch_trim = ac.node("fcs/pitch-trim-cmd-norm").get_double_value()  # set by the trim, held (read once)
+    u_arr[8] = pitch_trim
     max_dh = max_dv = max_dphi = 0.0
     bar = _progress_bar(sc, progress)
     status, reason = "completed", ""
@@ -606,7 +602,8 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 # with a bank the pilot writes straight into the bank's command row of this step
                 u_row = cmd_views[k % K] if cmd_views is not None else u_arr
                 pilot_into(t_s, y_pilot, u_row)
-                el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref = u_row.tolist()[:8]
+                cmd = u_row.tolist()  # the logged row: the pilot's 8 outputs and the held pitch trim
+                el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref, _ = cmd
                 if scale is None:
                     write_cmd(el, ai, ru, th)
                 else:  # an actuator's lost effectiveness made up (the log keeps the pilot's command)
@@ -620,9 +617,9 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 inj.after_commands()
                 inj.plant(t_s, xl)
                 eta = inj.icing_eta
-            cmd = (el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref, pitch_trim)
-            if cmd_rows is not None and inj is not None:
-                cmd_rows[k % K] = cmd
+                cmd = (el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref, pitch_trim)
+                if cmd_rows is not None:
+                    cmd_rows[k % K] = cmd
             # --- statistics: deviation from the references (airspeed relative to the steady air) --
             v_air = math.sqrt((xl[i_vn] - wn) ** 2 + (xl[i_ve] - we) ** 2 + xl[i_vd] ** 2)
             dv = abs(xl[i_vc] * v_air / xl[i_vt] - vc_ref)

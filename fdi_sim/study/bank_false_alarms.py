@@ -23,6 +23,7 @@ from typing import Sequence
 from fdi_sim.decision.intervals import poisson_rate_interval
 from fdi_sim.scenario import load
 from fdi_sim.scenario.loader import from_dict
+from fdi_sim.units import S_PER_H
 
 REPO = Path(__file__).resolve().parents[2]
 #: the shipped scenarios whose operating points the bar names, per aircraft
@@ -35,7 +36,6 @@ POINTS: dict[str, tuple[str, ...]] = {
 #: reported on 201-208, which no design decision saw
 DEVELOPMENT_SEEDS = tuple(range(101, 109))
 HELD_OUT_SEEDS = tuple(range(201, 209))
-S_PER_H = 3600.0
 
 
 @dataclass(frozen=True)

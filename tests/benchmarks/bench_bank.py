@@ -17,9 +17,10 @@ import sys
 import tempfile
 import time
 
-from fdi_sim.aircraft import Aircraft, Atmosphere, trim
 from fdi_sim.scenario import loads
 from fdi_sim.sim import run
+
+from bench_loop import bare_rate  # the same bare JSBSim loop as bench_loop measures
 
 SC = """
 name = "bench_bank_{ac}"
@@ -38,19 +39,6 @@ block_s = {block_s}
 per_step = {per_step}
 """
 CASES = {"f16": (10000.0, "vt_kts = 400.0"), "DHC6": (5000.0, "vc_kts = 120.0")}
-
-
-def bare_rate(ac_name: str, sc, T: float) -> float:
-    ac = Aircraft(ac_name, sc.dt_s)
-    trim(ac, sc.operating_point())
-    ac.set_atmosphere(Atmosphere("moderate"), 1)
-    write = ac.command_writer()
-    n = int(T / sc.dt_s)
-    t0 = time.perf_counter()
-    for _ in range(n):
-        write(0.0, 0.0, 0.0, 0.3)
-        ac.step()
-    return n / (time.perf_counter() - t0)
 
 
 def scenario(ac: str, T: float, bank: str, per_step: bool, block_s: float = 0.5):
