@@ -260,6 +260,7 @@ def build_loop_bank(sc: Scenario, sensors: SensorSuite, progress: bool | None) -
 
     if not bank_members(sc):
         return None
+    # the loop's fast path has the pilot write its 8 outputs into the bank's rows: PILOT_FIELDS order
     return build_bank(sc, meas_names=sensors.names, cmd_names=PILOT_FIELDS,
                       sensor_rates_hz={s.name: s.rate_hz for s in sensors.specs}, pilot_sensors=sensors.names,
                       progress=progress is not False)
@@ -549,9 +550,9 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     if bank is not None:
         n_fdi, K, S = bank.n, bank.K, bank.S
         cmd_rows, meas_rows, valid_rows = bank.cmd_rows, bank.meas_rows, bank.valid_rows
-        if tuple(bank.cmd_names) == PILOT_FIELDS:  # the fast path's rows: the pilot's 8 outputs, then the trim
-            cmd_rows[:, 8] = pitch_trim
-            cmd_views = [cmd_rows[i] for i in range(K)]
+        # the fast path's rows (build_loop_bank gives the bank PILOT_FIELDS): the pilot's 8 outputs, then the trim
+        cmd_rows[:, 8] = pitch_trim
+        cmd_views = [cmd_rows[i] for i in range(K)]
     else:
         n_fdi = K = S = n_steps + 2
         cmd_rows = meas_rows = valid_rows = None
@@ -602,8 +603,8 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 # with a bank the pilot writes straight into the bank's command row of this step
                 u_row = cmd_views[k % K] if cmd_views is not None else u_arr
                 pilot_into(t_s, y_pilot, u_row)
-                cmd = u_row.tolist()  # the logged row: the pilot's 8 outputs and the held pitch trim
-                el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref, _ = cmd
+                cmd = u_row  # the logged row: the pilot's 8 outputs and the held pitch trim (written as is)
+                el, ai, ru, th, h_ref, vc_ref, psi_ref, phi_ref, _ = u_row.tolist()
                 if scale is None:
                     write_cmd(el, ai, ru, th)
                 else:  # an actuator's lost effectiveness made up (the log keeps the pilot's command)

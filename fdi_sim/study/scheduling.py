@@ -30,9 +30,9 @@ import numpy as np
 from fdi_sim.decision.intervals import poisson_rate_interval
 from fdi_sim.scenario import load
 from fdi_sim.scenario.loader import from_dict
+from fdi_sim.study.bank_false_alarms import HELD_OUT_SEEDS
 
 REPO = Path(__file__).resolve().parents[2]
-HELD_OUT_SEEDS = tuple(range(201, 209))
 
 
 @dataclass(frozen=True)

@@ -156,11 +156,10 @@ def test_a_decision_rule_that_needs_fault_directions(tmp_path, f16_text):
 
 def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
     """The bank's k-of-n kernel on a chi-square(3) statistic of white noise: the fraction of samples
-    in alarm is P(Bin(n, p) >= k) (decision.persistence, exact), inside the 99.9 % Clopper-Pearson
-    interval counted over independent n-sample blocks; and splitting the input changes nothing."""
+    in alarm is P(Bin(n, p) >= k) (decision.persistence, exact), within 4 standard errors of batch
+    means; and splitting the input changes nothing."""
     from scipy.stats import chi2
 
-    from fdi_sim.decision.intervals import clopper_pearson
     from fdi_sim.decision.persistence import persistence_false_alarm
     from fdi_sim.sim.bank import _decide
 
@@ -185,9 +184,10 @@ def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
 
     ex, al, iso = go([N])
     expect = persistence_false_alarm(p, k, n)
-    m = N // n
-    lo, hi = clopper_pearson(int(round(al.mean() * m)), m, level=0.999)
-    assert lo <= expect <= hi, (al.mean(), expect)
+    # batch means: 400 batches of 1000 samples are independent to well within the test's margin
+    # (the alarm's correlation is n = 5 samples long)
+    b = al.reshape(400, -1).mean(axis=1)
+    assert abs(b.mean() - expect) < 4.0 * b.std(ddof=1) / np.sqrt(len(b)), (b.mean(), expect)
     assert abs(ex.mean() - p) < 4 * np.sqrt(p * (1 - p) / N)
     assert np.all(iso[al] == 0) and np.all(iso[~al] == -1)
     ex2, al2, iso2 = go(rng.integers(1, 40, size=N))

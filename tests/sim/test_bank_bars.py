@@ -30,7 +30,8 @@ def test_shipped_fault_scenario_detected_and_isolated(tmp_path, name):
     if all(d.target == "airframe" for d in hits):  # icing: no bank has an icing hypothesis
         return
     assert any(d.isolation_correct for d in hits), s.format()
-    assert f"delay {min(d.delay_s for d in hits):.2f} s" in s.format()
+    right = [d for d in hits if d.isolation_correct]
+    assert min(d.delay_s for d in right) < 120.0  # the slowest, the pitot drift at 0.1 kt/s, takes 105 s
 
 
 #: measured (docs/card/bank_false_alarms.json): one alarm in 8 flights, seed 204, the airspeed check
