@@ -28,8 +28,7 @@ def chi2_threshold(dof: int, p_false_alarm: float) -> float:
     p_false_alarm : float
         False-alarm probability per test, in (0, 1).
     """
-    if not 0.0 < p_false_alarm < 1.0:
-        raise DesignError(f"p_false_alarm must be in (0, 1), got {p_false_alarm}")
+    p_false_alarm = check_probability(p_false_alarm, "p_false_alarm")
     if dof < 1:
         raise DesignError(f"a chi-square test needs at least 1 degree of freedom, got {dof}")
     return float(chi2.isf(p_false_alarm, dof))

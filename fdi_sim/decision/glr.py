@@ -42,6 +42,7 @@ from scipy.stats import norm
 
 from fdi_sim.decision.base import Decision, DecisionTrace, check_positive, check_probability
 from fdi_sim.errors import DesignError
+from fdi_sim.decision.cusum import SIEGMUND_RHO2
 
 __all__ = ["WindowGlr", "glr_arl0", "glr_threshold", "siegmund_nu"]
 
@@ -132,7 +133,7 @@ class WindowGlr:
         bound is below ``w_max`` (longer delays are cut by the window).
         """
         d = check_positive(abs(shift) / self.sigma, "|shift| / sigma")
-        return (self.threshold + 0.583 * d) / (d * d / 2.0)  # (h + rho delta) / K, K = delta^2 / 2
+        return (self.threshold + SIEGMUND_RHO2 / 2.0 * d) / (d * d / 2.0)  # (h + rho delta) / K, rho = 0.583
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Empty the window."""

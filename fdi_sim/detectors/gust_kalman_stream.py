@@ -258,10 +258,6 @@ class GustKalmanStream:
         self.reset(self.schedule.nearest((h_ft, vc_kts)))
         self._s_f[:] = (h_ft, vc_kts, h_ft, vc_kts)
 
-    @property
-    def active_point(self) -> int:
-        return int(self._st[1])
-
     def process(self, u: NDArray[np.float64], y: NDArray[np.float64], ok: NDArray[np.bool_],
                 out_statistic: NDArray[np.float64], out_threshold: NDArray[np.float64], out_valid: NDArray[np.bool_],
                 out_hypothesis: NDArray[np.int64], out_cosine: NDArray[np.float64], out_point: NDArray[np.int64],

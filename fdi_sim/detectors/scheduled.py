@@ -127,5 +127,6 @@ class GustKalmanSchedule:
         m = design.model
         y0 = np.asarray(m.y0, dtype=float)
         pt = np.array([[y0[list(m.output_names).index(s)] for s in SCHEDULE_SIGNALS]])
-        return cls(pt, np.array([2000.0, 40.0]), (design,), (calibration,), (label,) if label else (),
+        # one point: the spacing scales no distance (a unit one, not some aircraft's grid)
+        return cls(pt, np.ones(len(SCHEDULE_SIGNALS)), (design,), (calibration,), (label,) if label else (),
                    notes=("single design: not scheduled",))

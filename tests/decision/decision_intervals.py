@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import binomtest, norm
+from scipy.stats import norm
+
+from fdi_sim.decision.intervals import clopper_pearson
 
 
 def binomial_ci(k: int, n: int) -> tuple[float, float]:
-    """Clopper-Pearson 95 % interval of a proportion k / n."""
-    ci = binomtest(int(k), int(n)).proportion_ci(0.95, method="exact")
-    return float(ci.low), float(ci.high)
+    """Clopper-Pearson 95 % interval of a proportion k / n (the project's own)."""
+    return clopper_pearson(int(k), int(n))
 
 
 def mean_ci(x: NDArray) -> tuple[float, float, float]:

@@ -50,3 +50,12 @@ def test_bad_parameters_raise() -> None:
             wald_thresholds(a, b)
     with pytest.raises(DesignError):
         Sprt(1.0, 0.0)
+
+
+def test_wald_thresholds_are_walds_eq_3_2():
+    """Wald (1945) eq. 3.2: a = log((1 - beta) / alpha), b = log(beta / (1 - alpha)); for
+    alpha = 0.01, beta = 0.05: a = log(95) = 4.5539, b = log(0.05 / 0.99) = -2.9857."""
+    from fdi_sim.decision.sprt import wald_thresholds
+
+    a, b = wald_thresholds(0.01, 0.05)
+    assert a == pytest.approx(4.553877, abs=1e-6) and b == pytest.approx(-2.985682, abs=1e-6)
