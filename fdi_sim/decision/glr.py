@@ -41,8 +41,8 @@ from scipy.optimize import brentq
 from scipy.stats import norm
 
 from fdi_sim.decision.base import Decision, DecisionTrace, check_positive, check_probability
-from fdi_sim.errors import DesignError
 from fdi_sim.decision.cusum import SIEGMUND_RHO2
+from fdi_sim.errors import DesignError
 
 __all__ = ["WindowGlr", "glr_arl0", "glr_threshold", "siegmund_nu"]
 
