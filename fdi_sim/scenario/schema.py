@@ -73,6 +73,22 @@ class LimitsSection(_Section):
     vc_min_kts: float = Field(default=50.0, ge=0.0, le=500.0)
 
 
+class FdiDesignSection(_Section):
+    """The conditions the bank is designed and calibrated for, when not the flight's own
+    (``fdi_sim.sim.bank_design.design_scenario``): a Monte Carlo study designs its bank once per
+    schedule-grid node at nominal conditions and flies it in the sampled ones."""
+
+    point: Literal["flight", "grid"] = Field(
+        default="flight", description="design at the flight's initial point, or at the nearest node of the "
+        "aircraft's schedule grid (fdi_sim.sim.designs.DEFAULT_SPACING)")
+    turbulence: Literal["none", "light", "moderate", "severe"] | None = Field(
+        default=None, description="turbulence of the training flights (default: the flight's)")
+    wind_speed_kts: float | None = Field(default=None, ge=0.0, le=100.0,
+                                         description="steady wind of the training flights [kt] (default: the flight's)")
+    noise_scale: float | None = Field(default=None, ge=0.0, le=100.0,
+                                      description="sensor noise scale of the training flights (default: the flight's)")
+
+
 class FdiSection(_Section):
     """The FDI bank flown in the loop (``fdi_sim.sim.bank``)."""
 
@@ -94,6 +110,7 @@ class FdiSection(_Section):
     log_residuals: bool = True
     calibration_flights: int = Field(default=24, ge=2, le=1000)
     calibration_duration_s: float = Field(default=300.0, ge=10.0, le=36000.0)
+    design: FdiDesignSection = FdiDesignSection()
 
     @model_validator(mode="after")
     def _kn(self) -> "FdiSection":

@@ -108,6 +108,7 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
     members = bank_members(sc)
     if not members:
         return None
+    sc = design_scenario(sc)  # designs, training flights and thresholds: at the design conditions
     f = sc.model.fdi
     if f.decision == "angle-magnitude":
         bad = [m.id for m in members if IN_LOOP[m.id] != "gust"]
@@ -134,6 +135,47 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
     p = per_sample_target(f.far_per_h, len(streams), f.rate_hz)
     calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
     return bank
+
+
+def design_scenario(sc: Scenario) -> Scenario:
+    """The scenario the bank is designed and calibrated on: ``sc`` itself unless ``[fdi.design]``
+    moves the point to the schedule grid's nearest node or sets the training flights' turbulence,
+    wind or sensor noise.
+
+    The grid is the aircraft's (:data:`fdi_sim.sim.designs.DEFAULT_SPACING`): nodes at whole
+    multiples of the spacing in altitude [ft] and calibrated airspeed [kt], so runs of a study
+    that sample the point continuously share one design per node (the gain scheduling of a real
+    bank), and each node is designed and calibrated once (cached).
+    """
+    from fdi_sim.scenario.loader import from_dict
+    from fdi_sim.sim.designs import default_spacing, initial_vc_kts
+
+    d = sc.model.fdi.design
+    if d.point == "flight" and d.turbulence is None and d.wind_speed_kts is None and d.noise_scale is None:
+        return sc
+    data = json.loads(sc.to_json())
+    what = []
+    if d.point == "grid":
+        dh, dv = default_spacing(sc.aircraft)
+        h = max(dh, round(sc.model.initial.h_ft / dh) * dh)
+        vc = max(dv, round(initial_vc_kts(sc) / dv) * dv)
+        data["initial"] = {**data["initial"], "h_ft": h, "vc_kts": vc, "vt_kts": None}
+        what.append(f"grid node h {h:g} ft, vc {vc:g} kt")
+    atm = dict(data.get("atmosphere", {}))
+    if d.turbulence is not None:
+        atm["turbulence"] = d.turbulence
+        what.append(f"{d.turbulence} turbulence")
+    if d.wind_speed_kts is not None:
+        atm["wind_speed_kts"] = d.wind_speed_kts
+        what.append(f"wind {d.wind_speed_kts:g} kt")
+    data["atmosphere"] = atm
+    if d.noise_scale is not None:
+        data["sensors"] = {**data.get("sensors", {}), "noise_scale": d.noise_scale}
+        what.append(f"noise scale {d.noise_scale:g}")
+    # the design conditions are the design; a flight-specific name, seed or duration is not
+    data["fdi"] = {**data["fdi"], "design": {}}
+    data.update(name=f"{sc.aircraft}_design", description="", seed=0)
+    return from_dict(data, source=f"{sc.source} (bank design at {', '.join(what)})")
 
 
 class LazyTraining:

@@ -279,7 +279,7 @@ def bank_metadata(bank: FdiBank) -> dict[str, str]:
 
 
 def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | None = None,
-        progress: bool | None = None, force: bool = False) -> RunResult:
+        progress: bool | None = None, force: bool = False, wall_limit_s: float | None = None) -> RunResult:
     """Fly a scenario and write its MCAP log.
 
     Parameters
@@ -295,6 +295,10 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     force : bool
         Replace an existing file at the log path even if it is not an MCAP log (never the
         scenario file itself).
+    wall_limit_s : float, optional
+        Wall-clock limit of the flight [s] (a Monte Carlo study's per-run limit): when it passes,
+        the run ends between two steps as if stopped, status ``interrupted``, reason
+        ``wall-clock limit ...``. Works in any thread (a timer sets the stop flag).
 
     Returns
     -------
@@ -348,6 +352,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     tr = None
     ch_truth = None
     wall0 = time.perf_counter()
+    timer = None
     with stop.installed():
         flying = False
         writer = None
@@ -412,6 +417,10 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
                 raise KeyboardInterrupt
             # from here on a stop request only sets a flag that the loop reads once per step
             stop.start_flight()
+            if wall_limit_s is not None:
+                timer = threading.Timer(float(wall_limit_s), _time_up, (stop, float(wall_limit_s)))
+                timer.daemon = True
+                timer.start()
             writer.move_to(out)
             flying = True
             wall0 = time.perf_counter()  # the loop's wall time (the set-up, trim and bank design before it)
@@ -430,6 +439,8 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
                 _discard(writer, starting, stop)
             raise
         finally:
+            if timer is not None:
+                timer.cancel()
             if flying:
                 writer.close()
     wall = time.perf_counter() - wall0
@@ -448,6 +459,11 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         trim_alpha_deg=tr.alpha_rad * DEG_PER_RAD if tr else math.nan, **fdi,
     )
     return RunResult(log_path=out, status=status, summary=summary)
+
+
+def _time_up(stop: StopRequest, limit_s: float) -> None:
+    stop.reason = stop.reason or f"wall-clock limit of {limit_s:g} s reached"
+    stop.requested = True
 
 
 def _discard(writer: FlightLogWriter | None, starting: Path, stop: StopRequest) -> None:
