@@ -123,3 +123,10 @@ class CacheError(FdiSimError, OSError):
 
     The message names the folder, the environment variable that chose it and the fix.
     """
+
+
+class StudyError(ScenarioError):
+    """A study file, its results folder or its cluster is unusable (what, where, and the fix).
+
+    Same fields as :class:`ScenarioError`; ``source`` is the study file or the results folder.
+    """
