@@ -168,6 +168,10 @@ class RunSummary:
     fdi_false_alarms: tuple[BankAlarm, ...] = ()
     fdi_reconfigurations: tuple[dict, ...] = ()
     fdi_notes: tuple[str, ...] = ()
+    #: every alarm episode of every member (the false ones are also in fdi_false_alarms)
+    fdi_alarms: tuple[BankAlarm, ...] = ()
+    #: each member's threshold (the gust filter's at its first schedule point)
+    fdi_thresholds: tuple[float, ...] = ()
 
     @property
     def realtime_factor(self) -> float:
@@ -450,7 +454,9 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         faults = injector.catalog() if injector is not None else []
         det, false = fdi_outcomes(bank, faults, t_end_s)
         fdi = dict(fdi_detectors=tuple(m.id for m in bank.members), fdi_detections=det, fdi_false_alarms=false,
-                   fdi_reconfigurations=tuple(bank.reconfig_events), fdi_notes=bank.notes)
+                   fdi_reconfigurations=tuple(bank.reconfig_events), fdi_notes=bank.notes,
+                   fdi_alarms=tuple(bank.alarms), fdi_thresholds=tuple(
+                       json.loads(bank_metadata(bank)["members"])[i]["threshold"] for i in range(len(bank.members))))
     summary = RunSummary(
         scenario=sc.name, aircraft=sc.aircraft, seed=sc.seed, status=status, reason=reason, t_end_s=t_end_s,
         steps=steps,
