@@ -1,4 +1,4 @@
-"""``fdi-sim``: run | detect | scenarios | plugins | info | verify | repair | linearize.
+"""``fdi-sim``: run | detect | study | scenarios | plugins | info | verify | repair | linearize.
 
 Exit codes: 0 success, 1 a run that diverged or was interrupted (or a log that `verify` finds
 damaged), 2 bad input (one paragraph, no traceback).
@@ -156,6 +156,9 @@ def build_parser() -> argparse.ArgumentParser:
     from fdi_sim.linear import cli as linear_cli  # light: imports its work when run
 
     linear_cli.add_parser(sub)
+    from fdi_sim.study import cli as study_cli  # light: imports Dask when run
+
+    study_cli.add_parser(sub)
     return p
 
 
