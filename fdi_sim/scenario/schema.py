@@ -85,6 +85,8 @@ class FdiDesignSection(_Section):
         default=None, description="turbulence of the training flights (default: the flight's)")
     wind_speed_kts: float | None = Field(default=None, ge=0.0, le=100.0,
                                          description="steady wind of the training flights [kt] (default: the flight's)")
+    wind_from_deg: float | None = Field(default=None, ge=0.0, le=360.0,
+                                        description="its direction (from) [deg] (default: the flight's; 0 without wind)")
     noise_scale: float | None = Field(default=None, ge=0.0, le=100.0,
                                       description="sensor noise scale of the training flights (default: the flight's)")
 

@@ -151,7 +151,7 @@ def design_scenario(sc: Scenario) -> Scenario:
     from fdi_sim.sim.designs import default_spacing, initial_vc_kts
 
     d = sc.model.fdi.design
-    if d.point == "flight" and d.turbulence is None and d.wind_speed_kts is None and d.noise_scale is None:
+    if d.point == "flight" and all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale)):
         return sc
     data = json.loads(sc.to_json())
     what = []
@@ -168,6 +168,10 @@ def design_scenario(sc: Scenario) -> Scenario:
     if d.wind_speed_kts is not None:
         atm["wind_speed_kts"] = d.wind_speed_kts
         what.append(f"wind {d.wind_speed_kts:g} kt")
+    if d.wind_from_deg is not None:
+        atm["wind_from_deg"] = d.wind_from_deg
+    if float(atm.get("wind_speed_kts", 0.0)) == 0.0:
+        atm["wind_from_deg"] = 0.0  # no wind has no direction: one design, whatever the flight's
     data["atmosphere"] = atm
     if d.noise_scale is not None:
         data["sensors"] = {**data.get("sensors", {}), "noise_scale": d.noise_scale}

@@ -323,6 +323,19 @@ def fly_study(study: Study, out_dir: str | Path, *, workers: int | None = None, 
         A folder of another study, a scheduler that does not answer, too little disk, a bank that
         cannot be designed: all before any run flies.
     """
+    held: dict[str, Any] = {"client": client, "cluster": None}
+    if client is None and scheduler:  # a scheduler that does not answer: said before the folder is made
+        held["client"], _ = _client(workers, scheduler)
+    try:
+        return _fly(study, out_dir, workers, held, progress)
+    finally:
+        if client is None and held["client"] is not None:  # ours: closed however the study ended
+            held["client"].close()
+            if held["cluster"] is not None:
+                held["cluster"].close()
+
+
+def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str, Any], progress: bool) -> StudyOutcome:
     from distributed import as_completed
 
     out = open_results(study, out_dir)
@@ -342,10 +355,9 @@ def fly_study(study: Study, out_dir: str | Path, *, workers: int | None = None, 
                          "training flights of its own",
                          'design the bank at nominal conditions: bank.design = { point = "grid", turbulence = '
                          '"moderate", wind_speed_kts = 0.0, noise_scale = 1.0 } (keep only what you sample)')
-    own = client is None
-    cluster = None
-    if own:
-        client, cluster = _client(workers, scheduler)
+    if held["client"] is None:  # a local cluster, started only when there is something to fly
+        held["client"], held["cluster"] = _client(workers, None)
+    client = held["client"]
     keep = study.model.output.statistics or study.model.output.full_logs
     flown = lost = 0
     hours = 0.0
@@ -396,14 +408,10 @@ def fly_study(study: Study, out_dir: str | Path, *, workers: int | None = None, 
     finally:
         if bar is not None:
             bar.close()
-        if own:
-            try:
-                client.cancel(futures, force=True)
-            except Exception:  # noqa: BLE001 - closing anyway
-                pass
-            client.close()
-            if cluster is not None:
-                cluster.close()
+        try:
+            client.cancel(futures, force=True)  # runs not finished are not wanted any more
+        except Exception:  # noqa: BLE001 - closing anyway
+            pass
     return StudyOutcome(out, total, len(done), flown, lost, interrupted, time.perf_counter() - t0, hours)
 
 
