@@ -40,7 +40,7 @@ def main(runs: int = 24, T: float = 600.0) -> None:
         p = Path(d) / "bench.toml"
         p.write_text(STUDY.format(runs=runs, T=T))
         st = load_study(p)
-        fly_study(st.with_overrides(runs=2, duration_s=10.0), Path(d) / "warm", workers=1, progress=False)  # designs
+        fly_study(st.with_overrides(runs=1), Path(d) / "warm", workers=1, progress=False)  # the design, calibrated
         from fdi_sim.scenario import loads
 
         h, speed = CASES["f16"]
