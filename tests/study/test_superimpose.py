@@ -109,6 +109,11 @@ def test_superimposed_gyro_bias_is_detected_after_its_onset_only(flights):
         before = r.t_s < T_ON_S
         assert np.array_equal(r.traces[mid]["statistic"][before], clean.traces[mid]["statistic"][before], equal_nan=True)
     assert "q_radps_bias" in r.format() and "not fed back" in r.format()
+    # the bank's side of a reconfiguration is replayed (decided, listed, never fed back to the pilot)
+    assert r.reconfigure and [c["sensor"] for c in r.reconfigurations] == ["q_radps"]
+    off = superimpose(free.log_path, _faults(GYRO_BIAS), np.random.default_rng(0), reconfigure=False)
+    assert not off.reconfigure and not off.reconfigurations
+    assert off.detection("q_radps_bias", "kinematic-attitude-v1") == att
 
 
 def test_against_the_same_faults_flown_in_the_loop(flights, capsys):
