@@ -223,6 +223,8 @@ def check_distribution(value: Any, source: str, key: str) -> None:
             raise _distribution_error(source, key, f"a bare list {list(value)!r} is ambiguous")
         return
     kinds = [k for k in value if k in DISTRIBUTIONS]
+    if not kinds and not set(value) & {"min", "max", "weights"}:
+        return  # a plain table (a fault's intermittent profile): passed on as it is
     extra = sorted(set(value) - set(DISTRIBUTIONS) - {"min", "max", "weights"})
     if len(kinds) != 1 or extra:
         raise _distribution_error(source, key, f"{dict(value)!r} is not one distribution"
@@ -253,7 +255,7 @@ def check_distribution(value: Any, source: str, key: str) -> None:
 
 def draw(value: Any, rng: np.random.Generator) -> Any:
     """One draw of a (checked) distribution; a plain value is returned as it is."""
-    if not isinstance(value, Mapping):
+    if not isinstance(value, Mapping) or not any(k in value for k in DISTRIBUTIONS):
         return value
     if "fixed" in value:
         return value["fixed"]
@@ -291,13 +293,8 @@ def resolve_scenario(ref: str, study_dir: Path) -> Path:
     p = (study_dir / ref)
     if p.suffix == ".toml" and p.is_file():
         return p
-    try:
-        from fdi_sim.scenario import shipped
-    except ImportError:  # pragma: no cover - until the shipped-scenarios module lands
-        q = Path(__file__).resolve().parents[2] / "scenarios" / f"{ref}.toml"
-        if q.is_file():
-            return q
-        raise FileNotFoundError(f"no scenario {ref!r}") from None
+    from fdi_sim.scenario import shipped
+
     return shipped.resolve(ref)
 
 
