@@ -11,13 +11,10 @@ import os
 import signal
 import sys
 import threading
-import tomllib
 from pathlib import Path
 from typing import Sequence
 
 from fdi_sim.errors import FdiSimError
-
-SCENARIO_DIR = Path(__file__).resolve().parents[1] / "scenarios"
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -42,14 +39,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
-    for p in sorted(SCENARIO_DIR.glob("*.toml")):
-        try:
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
-            desc = next(iter(str(data.get("description", "")).strip().splitlines()), "")
-            ac = data.get("aircraft", "?")
-        except (ValueError, OSError) as exc:  # TOMLDecodeError and UnicodeDecodeError are ValueErrors
-            desc, ac = f"(unreadable: {exc})", "?"
-        print(f"{p.relative_to(SCENARIO_DIR.parent)!s:48} {ac:5} {desc}")
+    from fdi_sim.scenario.shipped import list_scenarios, list_studies, shipped_dir
+
+    files = list_scenarios() + list_studies()
+    # paths as the README writes them (scenarios/...) in a checkout whose scenarios/ is the shipped folder
+    here = Path("scenarios")
+    short = here.is_dir() and here.resolve() == shipped_dir().resolve()
+    paths = [str(here / f.path.relative_to(shipped_dir()) if short else f.path) for f in files]
+    wn = max([len("name"), *(len(f.name) for f in files)])
+    wp = max([len("path"), *(len(p) for p in paths)])
+    print(f"{'name':{wn}}  {'aircraft':8}  {'kind':8}  {'path':{wp}}  description")
+    for f, path in zip(files, paths):
+        print(f"{f.name:{wn}}  {f.aircraft:8}  {f.kind:8}  {path:{wp}}  {f.description}")
     return 0
 
 

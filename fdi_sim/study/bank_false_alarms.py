@@ -23,9 +23,9 @@ from typing import Sequence
 from fdi_sim.decision.intervals import poisson_rate_interval
 from fdi_sim.scenario import load
 from fdi_sim.scenario.loader import from_dict
+from fdi_sim.scenario.shipped import shipped_dir
 from fdi_sim.units import S_PER_H
 
-REPO = Path(__file__).resolve().parents[2]
 #: the shipped scenarios whose operating points the bar names, per aircraft
 POINTS: dict[str, tuple[str, ...]] = {
     "f16": ("f16_cruise_doublets", "f16_climbing_turn", "f16_climb_accelerate"),
@@ -58,7 +58,7 @@ class PointResult:
 
 def fault_free_flight(name: str, seed: int, duration_s: float, turbulence: str = "moderate") -> object:
     """A shipped scenario without faults, in ``turbulence``, with the default bank, FDI topics only."""
-    sc = load(REPO / "scenarios" / f"{name}.toml")
+    sc = load(shipped_dir() / f"{name}.toml")
     d = json.loads(sc.to_json())
     d.update(seed=int(seed), duration_s=float(duration_s), faults=[], detectors=[])
     d["atmosphere"] = {**d.get("atmosphere", {}), "turbulence": turbulence}
@@ -97,7 +97,7 @@ def study_point(name: str, seeds: Sequence[int] = HELD_OUT_SEEDS, duration_s: fl
                       flush=True)
     if progress and sys.stderr.isatty():
         print(file=sys.stderr)
-    ac = load(REPO / "scenarios" / f"{name}.toml").aircraft
+    ac = load(shipped_dir() / f"{name}.toml").aircraft
     return PointResult(name, ac, len(seeds), hours, alarms, alarms / hours, poisson_rate_interval(alarms, hours),
                        design, by_det, statuses, tuple(firsts), notes)
 

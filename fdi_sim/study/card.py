@@ -37,6 +37,7 @@ from fdi_sim.detectors.samples import log_samples
 from fdi_sim.errors import FdiSimError
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import Scenario, load
+from fdi_sim.scenario.shipped import shipped_dir
 from fdi_sim.sim.calibrate import DEFAULT_TARGET, fault_free, fly_training, training_seeds
 from fdi_sim.sim.detect import (
     DetectorSpec, DetectorTrace, LogModel, alarm_onsets, build_detector, fault_outcome, fault_windows,
@@ -213,7 +214,7 @@ def condition_card(aircraft: str, turbulence: str, ids: Sequence[str], *, n_trai
 def cruise_scenario(aircraft: str, turbulence: str, duration_s: float) -> Scenario:
     from fdi_sim.scenario.loader import from_dict
 
-    sc = load(Path(__file__).resolve().parents[2] / "scenarios" / f"{CRUISE[aircraft]}.toml")
+    sc = load(shipped_dir() / f"{CRUISE[aircraft]}.toml")
     data = json.loads(sc.to_json())
     data["atmosphere"]["turbulence"] = turbulence
     data["duration_s"] = float(duration_s)

@@ -22,7 +22,6 @@ import argparse
 import json
 import tempfile
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -30,9 +29,8 @@ import numpy as np
 from fdi_sim.decision.intervals import poisson_rate_interval
 from fdi_sim.scenario import load
 from fdi_sim.scenario.loader import from_dict
+from fdi_sim.scenario.shipped import shipped_dir
 from fdi_sim.study.bank_false_alarms import HELD_OUT_SEEDS
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 @dataclass(frozen=True)
@@ -64,7 +62,7 @@ def compare(name: str = "f16_climb_accelerate", seeds: Sequence[int] = HELD_OUT_
     from fdi_sim.sim.bank import DecisionConfig, _decide
     from fdi_sim.sim.designs import design_schedule, schedule_points
 
-    sc = load(REPO / "scenarios" / f"{name}.toml")
+    sc = load(shipped_dir() / f"{name}.toml")
     points = schedule_points(sc)
     sched = design_schedule(sc, points, progress=progress)
     single = GustKalmanSchedule.single(sched.designs[0], sched.calibrations[0], sched.label(0))
