@@ -270,3 +270,17 @@ def test_cli_json(dhc6, tmp_path: Path) -> None:
     recs = load_records(out)
     for d in s["detectors"]:
         assert d["false_alarms"] == sum(1 for r in recs for a in r["false_alarms"] if a["detector"] == d["id"])
+
+
+def test_shipped_studies_load_and_share_designs() -> None:
+    """Every shipped study is valid, and its runs need few bank designs (grid nodes), not one each."""
+    from fdi_sim.scenario.shipped import list_studies
+    from fdi_sim.study.spec import design_groups
+
+    studies = list(list_studies())
+    assert len(studies) >= 5
+    for entry in studies:
+        path = getattr(entry, "path", entry)
+        st = load_study(path)
+        groups, _ = design_groups([st.run_scenario(i)[0] for i in range(min(st.n_runs, 300))])
+        assert len(groups) <= 30, (st.name, len(groups))
