@@ -1,0 +1,455 @@
+"""The study report: one self-contained ``index.html`` (figures embedded, and saved beside it).
+
+Order, so that it reads in a minute: the headline numbers (runs, flight hours, the bank's
+false-alarm rate against its design, detection and delay); the table comparing the members on
+the same runs; the figures (ROC curves, false-alarm rate against threshold scale, delay
+histograms, confusion matrices); statuses; how to fly a run again; the definitions.
+
+Everything shown comes from the run records (:func:`fdi_sim.study.stats.summarize`) and, for the
+ROC and threshold figures, from the logged statistics (:func:`fdi_sim.study.rescore.rescore`),
+so any study can be reported later, elsewhere (STYLE rule 13). The figures are drawn with
+matplotlib's object interface and the Agg renderer (no pyplot state, no display).
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fdi_sim.study.stats import BANK, NOT_DETECTED, NOT_ISOLATED
+
+#: at most this many runs listed per kind in "fly a run again"
+MAX_LISTED_RUNS = 5
+
+CSS = """
+body{font-family:system-ui,sans-serif;max-width:1100px;margin:1.5em auto;padding:0 1em;color:#222}
+h1{font-size:1.5em;margin-bottom:0.2em} h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
+.headline{background:#f4f6fa;border-left:4px solid #3a6ea5;padding:0.6em 1em;font-size:1.05em}
+.headline li{margin:0.25em 0} .bad{color:#b00020;font-weight:600} .ok{color:#1b7a1b;font-weight:600}
+table{border-collapse:collapse;font-size:0.86em;margin:0.5em 0} th,td{border:1px solid #ccc;padding:3px 6px}
+th{background:#eef} td.num{text-align:right;font-variant-numeric:tabular-nums}
+img{max-width:100%;border:1px solid #ddd} code{background:#f3f3f3;padding:0 3px}
+.small{font-size:0.85em;color:#555}
+"""
+
+
+# --- formatting ----------------------------------------------------------------------------------
+def _f(x: Any, digits: int = 3) -> str:
+    """A number in ``digits`` significant figures ("-" for None or NaN)."""
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    if isinstance(x, (bool, np.bool_)):
+        return "yes" if x else "no"
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    return f"{float(x):.{digits}g}"
+
+
+def _ci(ci: Sequence[float] | None, digits: int = 3) -> str:
+    return "-" if ci is None else f"{_f(ci[0], digits)} - {_f(ci[1], digits)}"
+
+
+def _pct(p: float | None, ci: Sequence[float] | None = None) -> str:
+    if p is None:
+        return "-"
+    s = f"{100 * p:.0f} %"
+    if ci is not None:
+        s += f" ({100 * ci[0]:.0f} - {100 * ci[1]:.0f} %)"
+    return s
+
+
+def _e(x: Any) -> str:
+    return html.escape(str(x))
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[Any]], numeric_from: int = 1) -> str:
+    out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in header) + "</tr>"]
+    for row in rows:
+        cells = []
+        for i, c in enumerate(row):
+            cls = ' class="num"' if i >= numeric_from else ""
+            cells.append(f"<td{cls}>{c}</td>")  # cells are escaped by the caller (they may hold markup)
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    return "\n".join(out) + "</table>"
+
+
+def _verdict(d: Mapping[str, Any]) -> str:
+    """Empirical false-alarm rate against the prediction, in words (with markup)."""
+    if d.get("far_per_h_ci") is None or d.get("predicted_far_per_h") is None:
+        return "-"
+    if d["exceeds_prediction"]:
+        return '<span class="bad">above</span>'
+    if d["prediction_in_ci"]:
+        return "consistent"
+    return '<span class="ok">below</span>'
+
+
+# --- sections ----------------------------------------------------------------------------------------
+def _headline(summary: Mapping[str, Any]) -> str:
+    b = summary["bank"]
+    st = ", ".join(f"{c} {s}" for s, c in summary["statuses"].items() if c)
+    items = [f"<b>{summary['runs']} runs</b> ({st}); <b>{summary['flight_h']:.4g} flight hours</b> completed, "
+             f"{b['exposure_h']:.4g} h of them armed and fault-free."]
+    if b.get("far_per_h") is not None:
+        design = b.get("predicted_far_per_h")
+        word = {"above": '<span class="bad">ABOVE the design rate</span>',
+                "below": '<span class="ok">below the design rate</span>',
+                "consistent": "consistent with the design rate"}
+        key = ("above" if b["exceeds_prediction"] else "consistent" if b["prediction_in_ci"] else "below") \
+            if design is not None else None
+        items.append(f"Bank false alarms: <b>{b['false_alarms']}</b> in {b['exposure_h']:.4g} h = <b>{_f(b['far_per_h'])} "
+                     f"per flight hour</b> ({summary['confidence']:.0%} interval {_ci(b['far_per_h_ci'])}); design "
+                     f"{_f(design)} /h: {word[key] if key else '-'}.")
+    if b["faults"]:
+        items.append(f"Detection: <b>{_pct(b['p_detect'], b['p_detect_ci'])}</b> of {b['faults']} injected faults; delay "
+                     f"median <b>{_f(b['delay_s_median'])} s</b>, 95th percentile {_f(b['delay_s_p95'])} s; isolation "
+                     f"right in {_pct(b['p_isolation_correct'])} of the detected.")
+        a = b["alfa"]
+        items.append(f"ALFA form (per flight): precision {_f(a['precision'])}, recall {_f(a['recall'])}, mean detection "
+                     f"time {_f(a['mean_detection_time_s'])} s (TP {a['tp']}, FP {a['fp']}, FN {a['fn']}, TN {a['tn']}).")
+    worst = [d for d in summary["detectors"] if d.get("exceeds_prediction")]
+    if worst:
+        items.append("Members above their predicted rate: " + ", ".join(
+            f"<b>{_e(d['id'])}</b> ({_f(d['far_per_h'])} /h vs {_f(d['predicted_far_per_h'])})" for d in worst) + ".")
+    return '<div class="headline"><ul>' + "".join(f"<li>{i}</li>" for i in items) + "</ul></div>"
+
+
+def _comparison(summary: Mapping[str, Any]) -> str:
+    rows = []
+    for d in list(summary["detectors"]) + [summary["bank"]]:
+        name = "<b>bank (any member)</b>" if d["id"] == BANK else f"<code>{_e(d['id'])}</code>"
+        a = d["alfa"]
+        rows.append([name, _f(d["runs"]), _f(d["false_alarms"]), _f(d["far_per_h"]), _ci(d["far_per_h_ci"]),
+                     _f(d["predicted_far_per_h"]), _verdict(d), _pct(d["p_false_alarm_per_run"], d["p_false_alarm_per_run_ci"]),
+                     f"{d['detected']}/{d['faults']}", _pct(d["p_detect"], d["p_detect_ci"]), _f(d["delay_s_median"]),
+                     _f(d["delay_s_p95"]), _pct(d["p_isolation_correct"]), _f(a["precision"]), _f(a["recall"])])
+    hdr = ["detector", "runs", "false alarms", "per flight h", "interval", "predicted", "vs prediction",
+           "P(false alarm) per run", "detected", "p_detect", "delay median [s]", "delay p95 [s]", "isolation right",
+           "ALFA precision", "ALFA recall"]
+    return _table(hdr, rows)
+
+
+def _by_type(summary: Mapping[str, Any]) -> str:
+    types = summary.get("fault_types", [])
+    if not types:
+        return "<p>No faults were injected (a false-alarm study).</p>"
+    rows = []
+    for d in list(summary["detectors"]) + [summary["bank"]]:
+        cells = []
+        for t in types:
+            x = d["by_fault_type"].get(t)
+            cells.append("-" if x is None else f"{_pct(x['p_detect'])} of {x['faults']}, {_f(x['delay_s_median'])} s")
+        rows.append([("<b>bank</b>" if d["id"] == BANK else f"<code>{_e(d['id'])}</code>")] + cells)
+    return _table(["detector"] + [f"{t}: p_detect, median delay" for t in types], rows)
+
+
+def _statuses(summary: Mapping[str, Any]) -> str:
+    s = _table(["status", "runs"], [[_e(k), _f(v)] for k, v in summary["statuses"].items()])
+    nc = summary.get("not_completed", [])
+    if nc:
+        s += "<p>Not completed (not counted in any rate):</p>" + _table(
+            ["run", "status", "reason"], [[_f(r["index"]), _e(r["status"]), _e(r["reason"])] for r in nc[:50]], 3)
+        if len(nc) > 50:
+            s += f"<p class='small'>... and {len(nc) - 50} more (runs/NNNNNN.json).</p>"
+    return s
+
+
+def _refly(records: Sequence[Mapping[str, Any]], results_dir: Path) -> str:
+    def cmd(r: Mapping[str, Any]) -> str:
+        scenario = r.get("scenario") or f"{int(r['index']):06d}.toml"
+        return f"<code>fdi-sim run {_e(results_dir / 'runs' / scenario)}</code>"
+
+    fa = [r for r in records if r.get("status") == "completed" and r.get("false_alarms")]
+    miss = [r for r in records if r.get("status") == "completed"
+            and any(d["detected_t_s"] is None for d in r.get("detections", []))
+            and not _any_member_detected_all(r)]
+    bad = [r for r in records if r.get("status") != "completed"]
+    out = ["<p>Every run flies again alone from its scenario file (its seed is in it), and writes a normal "
+           "full log: <code>fdi-sim run DIR/runs/NNNNNN.toml</code>. "
+           f"Here DIR is <code>{_e(results_dir)}</code>.</p><ul>"]
+    for what, rs in (("with a false alarm", fa), ("with a fault no member detected", miss), ("not completed", bad)):
+        if rs:
+            out.append(f"<li>Runs {what} ({len(rs)}): " + "; ".join(
+                f"run {int(r['index'])}: {cmd(r)}" for r in rs[:MAX_LISTED_RUNS]) + (" ..." if len(rs) > MAX_LISTED_RUNS else "")
+                + "</li>")
+    out.append("</ul>")
+    return "".join(out)
+
+
+def _any_member_detected_all(r: Mapping[str, Any]) -> bool:
+    """Every fault of the run detected by some member."""
+    faults = {d["fault"] for d in r.get("detections", [])}
+    hit = {d["fault"] for d in r.get("detections", []) if d["detected_t_s"] is not None}
+    return faults <= hit
+
+
+def _definitions(summary: Mapping[str, Any], rescored: Any) -> str:
+    b = summary["bank"]
+    items = [
+        "Only completed runs count for rates and probabilities. Intervals are exact at "
+        f"{summary['confidence']:.0%}: Poisson (Garwood) for rates, Clopper-Pearson for probabilities.",
+        "A <b>false alarm</b> is an alarm episode that begins outside every fault window + "
+        f"{summary['grace_s']:g} s; its rate is per <b>armed fault-free flight hour</b> (the flight from "
+        "<code>arm_s</code> on, minus the fault windows + grace).",
+        "<b>Predicted</b> rate: the bank splits its design rate evenly over its members (union bound), so a member is "
+        "predicted at most design / members per hour, the bank at most the design rate. Above = the interval's lower "
+        "end exceeds the prediction.",
+        "<b>Detection</b>: the first alarm sample at or after the fault's first onset; delay from that onset. The "
+        "bank's alarm is the OR of its members'.",
+        "<b>ALFA form</b> (Keipour et al. 2019, 2021), one outcome per flight: an alarm before the fault onset or on "
+        "a fault-free flight is a false positive; else a detected fault flight is a true positive, an undetected one "
+        "a false negative.",
+        "<b>Analytic probability of wrong diagnosis</b> (Hagenblad Algorithm 2, eq. 14): "
+        + _e(b.get("wrong_diagnosis_analytic_reason", "")) + ".",
+    ]
+    if rescored is not None:
+        rule = "each run's own k of n" if rescored.k is None else f"{rescored.k} of {rescored.n}"
+        items.append("<b>ROC and threshold curves</b> re-score the logged statistics at threshold x scale "
+                     f"(persistence: {rule}): "
+                     "exact at scale 1 (the decision the runs made), <b>open loop</b> after the first alarm at any "
+                     "other scale, since in the loop a confirmed alarm reconfigures the bank and changes the flight.")
+    return "<ul>" + "".join(f"<li>{i}</li>" for i in items) + "</ul>"
+
+
+# --- figures (matplotlib, object interface, Agg) -----------------------------------------------------
+def _figure(n_panels: int, panel_w: float = 3.6, panel_h: float = 2.8, cols: int = 3) -> tuple[Any, list[Any]]:
+    from matplotlib.figure import Figure
+
+    cols = max(1, min(cols, n_panels))
+    rows = max(1, math.ceil(n_panels / cols))
+    fig = Figure(figsize=(panel_w * cols, panel_h * rows), layout="constrained")
+    axes = fig.subplots(rows, cols, squeeze=False).ravel().tolist()
+    for ax in axes[n_panels:]:
+        ax.set_visible(False)
+    return fig, axes[:n_panels]
+
+
+def _save(fig: Any, path: Path) -> Path:
+    fig.savefig(path, dpi=90)
+    return path
+
+
+def _ids(summary: Mapping[str, Any]) -> list[str]:
+    return [d["id"] for d in summary["detectors"]] + [BANK]
+
+
+def roc_figure(rescored: Any, path: Path, confidence: float = 0.95) -> Path:
+    """ROC per member (and the bank): p_detect against false alarms per flight hour (log x), one
+    curve per fault type; a point with no false alarm is drawn at the axis' left edge (hollow)."""
+    from fdi_sim.study.rescore import roc
+
+    curves = roc(rescored, confidence)
+    ids = list(curves)
+    fig, axes = _figure(max(1, len(ids)))
+    for ax, ident in zip(axes, ids):
+        pos = [c.far_per_h[c.far_per_h > 0] for c in curves[ident].values()]
+        pos = np.concatenate(pos) if pos else np.zeros(0)
+        floor = 0.5 * float(pos.min()) if pos.size else 0.1
+        for ty, c in curves[ident].items():
+            x = np.where(c.far_per_h > 0, c.far_per_h, floor)
+            line, = ax.plot(x, c.p_detect, "-", lw=1.2, label=f"{ty} ({c.faults})")
+            zero = c.far_per_h == 0
+            ax.plot(x[zero], c.p_detect[zero], "o", mfc="none", ms=4, color=line.get_color())
+            at1 = int(np.argmin(np.abs(np.log(c.scales))))
+            ax.plot(x[at1], c.p_detect[at1], "s", ms=5, color=line.get_color())
+        ax.set_xscale("log")
+        ax.set_ylim(-0.03, 1.03)
+        ax.set_title(ident, fontsize=9)
+        ax.set_xlabel("false alarms per flight hour")
+        ax.set_ylabel("p_detect")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=6, loc="lower right")
+    if not ids:
+        axes[0].text(0.5, 0.5, "no faults injected: no ROC", ha="center", va="center")
+    fig.suptitle("ROC (square: the logged threshold; hollow: no false alarm, drawn at the left edge)", fontsize=9)
+    return _save(fig, path)
+
+
+def _log_ticks(ax: Any, lo: float, hi: float, axis: str = "x") -> None:
+    """Plain-number ticks (1-2-5 steps) on a log axis between ``lo`` and ``hi``."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+
+    decades = np.arange(math.floor(math.log10(lo)) - 1, math.ceil(math.log10(hi)) + 1)
+    ticks = [m * 10.0 ** e for e in decades for m in (1, 2, 5) if lo <= m * 10.0 ** e <= hi]
+    target = ax.xaxis if axis == "x" else ax.yaxis
+    target.set_major_locator(FixedLocator(ticks))
+    target.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    target.set_minor_locator(NullLocator())
+
+
+def far_figure(rescored: Any, summary: Mapping[str, Any], path: Path, confidence: float = 0.95) -> Path:
+    """False alarms per flight hour against threshold scale with exact Poisson intervals, per
+    member and the bank, with the predicted (design) rate as a line; a scale with no false alarm
+    is a hollow triangle at the bottom edge (its interval's upper end still shows)."""
+    from fdi_sim.decision.intervals import poisson_rate_interval
+
+    pred = {d["id"]: d.get("predicted_far_per_h") for d in list(summary["detectors"]) + [summary["bank"]]}
+    ids = list(rescored.detectors)
+    fig, axes = _figure(max(1, len(ids)))
+    x = rescored.scales
+    for ax, ident in zip(axes, ids):
+        d = rescored.detectors[ident]
+        if d.exposure_h <= 0:
+            ax.set_title(f"{ident}: no fault-free exposure", fontsize=9)
+            continue
+        ci = np.array([poisson_rate_interval(int(c), d.exposure_h, confidence) for c in d.false_alarms])
+        r = d.far_per_h
+        lows = [v for v in (list(r[r > 0]) + list(ci[:, 1]) + [pred.get(ident) or math.inf]) if v > 0]
+        bottom = 0.5 * min(lows)
+        ax.fill_between(x, np.maximum(ci[:, 0], bottom), ci[:, 1], alpha=0.25, label=f"{confidence:.0%} interval")
+        pos = r > 0
+        ax.plot(x[pos], r[pos], "k.-", lw=1.0, ms=3, label="empirical")
+        ax.plot(x[~pos], np.full((~pos).sum(), bottom), "kv", mfc="none", ms=4, label="no false alarm")
+        if pred.get(ident):
+            ax.axhline(pred[ident], color="r", ls="--", lw=1.0, label=f"predicted {pred[ident]:.3g} /h")
+        ax.axvline(1.0, color="grey", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_ylim(bottom / 1.5, None)
+        if x.size and x.min() > 0:
+            _log_ticks(ax, float(x.min()), float(x.max()))
+        ax.set_title(f"{ident} ({d.exposure_h:.3g} h)", fontsize=9)
+        ax.set_xlabel("threshold scale")
+        ax.set_ylabel("false alarms per flight hour")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=6)
+    return _save(fig, path)
+
+
+def delay_figure(summary: Mapping[str, Any], path: Path) -> Path:
+    """Detection-delay histograms per member and the bank, stacked by fault type."""
+    blocks = list(summary["detectors"]) + [summary["bank"]]
+    fig, axes = _figure(len(blocks))
+    every = [x for b in blocks for x in b["delays_s"]]
+    edges = np.histogram_bin_edges(every, bins=20) if every else np.linspace(0, 1, 11)
+    for ax, b in zip(axes, blocks):
+        per_type = [(t, x["delays_s"]) for t, x in b["by_fault_type"].items() if x["delays_s"]]
+        if per_type:
+            ax.hist([v for _, v in per_type], bins=edges, stacked=True, label=[t for t, _ in per_type])
+            ax.legend(fontsize=6)
+        else:
+            ax.text(0.5, 0.5, "no detection", ha="center", va="center", transform=ax.transAxes)
+        ax.set_title(f"{b['id']}: median {_f(b['delay_s_median'])} s, p95 {_f(b['delay_s_p95'])} s", fontsize=9)
+        ax.set_xlabel("delay [s]")
+        ax.set_ylabel("faults")
+    return _save(fig, path)
+
+
+def confusion_matrix(confusion: Mapping[str, Mapping[str, int]]) -> tuple[list[str], list[str], NDArray[np.int64]]:
+    """Rows (true targets), columns (isolated as: the targets first, in row order, so that right
+    isolations of sensors lie on the diagonal; then ``not isolated``, ``not detected``) and counts."""
+    rows = sorted(confusion)
+    named = {c for r in confusion.values() for c in r} - {NOT_ISOLATED, NOT_DETECTED}
+    cols = [r for r in rows if r in named] + sorted(named - set(rows)) + [NOT_ISOLATED, NOT_DETECTED]
+    m = np.array([[confusion[r].get(c, 0) for c in cols] for r in rows], dtype=np.int64).reshape(len(rows), len(cols))
+    return rows, cols, m
+
+
+def confusion_figure(summary: Mapping[str, Any], path: Path) -> Path:
+    """One confusion matrix per member and the bank: true target (rows) -> isolated as (columns)."""
+    blocks = [b for b in list(summary["detectors"]) + [summary["bank"]] if b["confusion"]]
+    fig, axes = _figure(max(1, len(blocks)), panel_w=4.2, panel_h=3.4)
+    for ax, b in zip(axes, blocks):
+        rows, cols, m = confusion_matrix(b["confusion"])
+        ax.imshow(m, cmap="Blues", aspect="auto")
+        for i in range(m.shape[0]):
+            for j in range(m.shape[1]):
+                if m[i, j]:
+                    ax.text(j, i, str(m[i, j]), ha="center", va="center", fontsize=7,
+                            color="white" if m[i, j] > 0.6 * m.max() else "black")
+        ax.set_xticks(range(len(cols)), cols, rotation=60, ha="right", fontsize=6)
+        ax.set_yticks(range(len(rows)), rows, fontsize=6)
+        ax.set_title(b["id"], fontsize=9)
+        ax.set_ylabel("true target", fontsize=7)
+    if not blocks:
+        axes[0].text(0.5, 0.5, "no faults injected", ha="center", va="center")
+    return _save(fig, path)
+
+
+# --- the page ---------------------------------------------------------------------------------------------
+def _img(path: Path, caption: str) -> str:
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return (f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{data}"/>'
+            f'<figcaption class="small">{_e(caption)} (also <code>{_e(path.name)}</code>)</figcaption></figure>')
+
+
+def _study_name(results_dir: Path) -> str:
+    p = results_dir / "study.json"
+    if p.is_file():
+        try:
+            d = json.loads(p.read_text())
+            return str(d.get("name") or d.get("study", {}).get("name") or results_dir.name)
+        except (ValueError, AttributeError):
+            pass
+    return results_dir.name
+
+
+def write_report(out_dir: str | Path, records: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
+                 rescored: Any = None, *, results_dir: str | Path | None = None, confidence: float | None = None
+                 ) -> Path:
+    """Write ``out_dir/index.html`` and its figures (``roc.png``, ``far_vs_threshold.png``,
+    ``delays.png``, ``confusion.png``) and return the page's path.
+
+    Parameters
+    ----------
+    out_dir : path
+        The report folder (created).
+    records : sequence of mapping
+        The run records (for statuses and the runs to fly again).
+    summary : mapping
+        :func:`fdi_sim.study.stats.summarize` of the records.
+    rescored : Rescored, optional
+        :func:`fdi_sim.study.rescore.rescore` over a range of scales; without it the ROC and
+        threshold figures are left out (and the page says so).
+    results_dir : path, optional
+        The study's results folder, for the ``fdi-sim run`` commands (default: ``out_dir``'s
+        parent when it holds ``runs/``, else ``out_dir``).
+    confidence : float, optional
+        Interval level of the figures (default: the summary's).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if results_dir is None:
+        results_dir = out.parent if (out.parent / "runs").is_dir() else out
+    results_dir = Path(results_dir).resolve()
+    conf = float(confidence if confidence is not None else summary.get("confidence", 0.95))
+    figs = []
+    if rescored is not None:
+        if any(d.by_type for d in rescored.detectors.values()):
+            figs.append(_img(roc_figure(rescored, out / "roc.png", conf),
+                             "ROC per detector and fault type: detection probability against false alarms per flight "
+                             "hour, over threshold scales (open loop after the first alarm except at scale 1)"))
+        figs.append(_img(far_figure(rescored, summary, out / "far_vs_threshold.png", conf),
+                         "False alarms per armed fault-free flight hour against threshold scale, with exact Poisson "
+                         "intervals; dashed: the predicted (design) rate; grey: the logged threshold"))
+    if summary["bank"]["faults"]:
+        figs.append(_img(delay_figure(summary, out / "delays.png"), "Detection delays after the fault onset"))
+        figs.append(_img(confusion_figure(summary, out / "confusion.png"),
+                         "Confusion: true target (rows) -> isolated as (columns), counts of (run, fault) pairs"))
+    name = _study_name(results_dir)
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'>",
+        f"<title>{_e(name)}: study report</title><style>{CSS}</style></head><body>",
+        f"<h1>{_e(name)}</h1><p class='small'>Study report of <code>{_e(results_dir)}</code>.</p>",
+        _headline(summary),
+        "<h2>Detectors on identical runs</h2>", _comparison(summary),
+        "<h2>Per fault type</h2>", _by_type(summary),
+        "<h2>Figures</h2>",
+    ]
+    if rescored is None:
+        parts.append("<p>No re-scoring given: ROC and false-alarm-rate-against-threshold figures left out "
+                     "(<code>fdi_sim.study.rescore.rescore</code>).</p>")
+    parts += figs
+    parts += ["<h2>Run statuses</h2>", _statuses(summary),
+              "<h2>Fly a run again</h2>", _refly(records, results_dir),
+              "<h2>Definitions</h2>", _definitions(summary, rescored), "</body></html>"]
+    page = out / "index.html"
+    page.write_text("\n".join(parts), encoding="utf-8")
+    return page
