@@ -111,3 +111,17 @@ def fly_results(out_dir: Path, cache_dir: Path, *, n_free: int = 6, faults: Sequ
 def load_folder(out_dir: Path) -> list[dict[str, Any]]:
     """The records of a results folder, in index order."""
     return [json.loads(p.read_text()) for p in sorted((Path(out_dir) / "runs").glob("[0-9]*.json"))]
+
+
+_SHARED: dict[str, tuple[Path, list[dict[str, Any]]]] = {}
+
+
+def shared_results(tmp_path_factory: Any) -> tuple[Path, list[dict[str, Any]]]:
+    """The folder of :func:`fly_results` with its defaults, flown once per test session (the
+    first test module that asks flies it, about 45 s; the others reuse it read-only)."""
+    if "default" not in _SHARED:
+        out = tmp_path_factory.mktemp("study_results")
+        records = fly_results(out, tmp_path_factory.mktemp("study_cache"))
+        _SHARED["default"] = (out, records)
+    out, records = _SHARED["default"]
+    return out, [json.loads(json.dumps(r)) for r in records]  # a copy a test may change
