@@ -21,7 +21,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from fdi_sim.scenario import load
     from fdi_sim.sim import run
 
-    sc = load(args.scenario)
+    from fdi_sim.scenario.shipped import resolve
+
+    sc = load(resolve(args.scenario))  # a path, or a shipped scenario's name
     if args.seed is not None:
         sc = sc.replace(seed=args.seed)
     if args.duration is not None:

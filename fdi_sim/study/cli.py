@@ -27,7 +27,14 @@ def cmd_study(args: argparse.Namespace) -> int:
     from fdi_sim.study.execute import fly_study, load_records
     from fdi_sim.study.spec import load_study
 
-    st = load_study(args.study)
+    from fdi_sim.errors import ScenarioError
+    from fdi_sim.scenario.shipped import resolve
+
+    try:
+        path = resolve(args.study)  # a path, or a shipped study's name
+    except ScenarioError:
+        path = args.study  # load_study names the file and the fix
+    st = load_study(path)
     if args.runs is not None or args.duration is not None:
         st = st.with_overrides(runs=args.runs, duration_s=args.duration)
     out = Path(args.out) if args.out else Path("studies") / st.name
