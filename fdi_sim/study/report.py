@@ -118,6 +118,7 @@ def _headline(summary: Mapping[str, Any]) -> str:
     if worst:
         items.append("Members above their predicted rate: " + ", ".join(
             f"<b>{_e(d['id'])}</b> ({_f(d['far_per_h'])} /h vs {_f(d['predicted_far_per_h'])})" for d in worst) + ".")
+    items += [f'<span class="bad">Note:</span> {_e(n)}' for n in summary.get("notes", [])]
     return '<div class="headline"><ul>' + "".join(f"<li>{i}</li>" for i in items) + "</ul></div>"
 
 

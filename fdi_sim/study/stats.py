@@ -8,6 +8,9 @@ Definitions (one per number, so that two studies can be compared):
   :data:`fdi_sim.sim.bank.LATE_GRACE_S`, the rule by which :func:`fdi_sim.sim.bank.fdi_outcomes`
   calls an alarm false); before ``arm_s`` the bank never decides (its samples are logged with
   ``valid = 0``). ``exposure_h`` is its sum over the runs [h], ``flight_h`` the whole flights'.
+  It includes armed samples at which a member's statistic is not valid yet (a kinematic check's
+  window filling: up to 17 s for ``kinematic-altitude-v1`` on the DHC-6), so on short flights a
+  member's rate is a little low.
 - **False alarm**: an alarm episode that begins outside every fault window + grace (the record's
   ``false_alarms``). ``far_per_h = false_alarms / exposure_h`` with the exact Poisson (Garwood)
   interval; ``p_false_alarm_per_run`` = runs with at least one / runs, Clopper-Pearson interval.
@@ -319,8 +322,8 @@ def summarize(records: Sequence[Mapping[str, Any]], *, confidence: float = 0.95,
         ``p_detect`` (+ ``_ci``), ``delay_s_median``, ``delay_s_p95``, ``delays_s``,
         ``p_isolation_correct`` (+ ``_ci``), ``confusion``, ``wrong_diagnosis_analytic`` (None)
         with ``wrong_diagnosis_analytic_reason``, ``alfa``, ``by_fault_type``), ``bank`` (the same
-        for the bank as a whole), ``fault_types``, ``confidence``, ``grace_s``. A probability or
-        rate without data is None.
+        for the bank as a whole), ``fault_types``, ``confidence``, ``grace_s``, ``notes`` (what
+        the records lacked). A probability or rate without data is None.
     """
     runs = completed(records)
     statuses = Counter(str(r.get("status", "unknown")) for r in records)
@@ -340,4 +343,9 @@ def summarize(records: Sequence[Mapping[str, Any]], *, confidence: float = 0.95,
                             for d in detector_ids(runs)]
     summary["bank"] = _block(BANK, [r for r in runs if r.get("detectors")], confidence, grace_s)
     summary["fault_types"] = sorted(summary["bank"]["by_fault_type"])
+    no_windows = [r.get("index") for r in runs if any("windows_s" not in f for f in r.get("faults", []))]
+    summary["notes"] = ([f"{len(no_windows)} completed runs (first: {no_windows[:5]}) have faults without windows_s: "
+                         "each fault's window is taken as [onset, end of flight], so exposure and the bank's false "
+                         "alarms after a fault that ended are wrong; store the injector's catalog (label, type, "
+                         "target, windows_s) in the record"] if no_windows else [])
     return summary

@@ -149,6 +149,8 @@ def test_records_without_windows_or_labels():
     s = S.summarize([r])
     assert s["detectors"][0]["by_fault_type"]["sensor-bias-v1"]["detected"] == 1
     assert s["bank"]["exposure_h"] == pytest.approx(95.0 / 3600)
+    assert len(s["notes"]) == 1 and "windows_s" in s["notes"][0]
+    assert S.summarize([rec(0)])["notes"] == []
 
 
 # --- real runs --------------------------------------------------------------------------------------------
