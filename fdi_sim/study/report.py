@@ -393,7 +393,7 @@ def _study_name(results_dir: Path) -> str:
 
 
 def write_report(out_dir: str | Path, records: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
-                 rescored: Any = None, *, results_dir: str | Path | None = None, confidence: float | None = None
+                 rescored: Any = None, *, study_dir: str | Path | None = None, confidence: float | None = None
                  ) -> Path:
     """Write ``out_dir/index.html`` and its figures (``roc.png``, ``far_vs_threshold.png``,
     ``delays.png``, ``confusion.png``) and return the page's path.
@@ -409,17 +409,17 @@ def write_report(out_dir: str | Path, records: Sequence[Mapping[str, Any]], summ
     rescored : Rescored, optional
         :func:`fdi_sim.study.rescore.rescore` over a range of scales; without it the ROC and
         threshold figures are left out (and the page says so).
-    results_dir : path, optional
-        The study's results folder, for the ``fdi-sim run`` commands (default: ``out_dir``'s
-        parent when it holds ``runs/``, else ``out_dir``).
+    study_dir : path, optional
+        The study's results folder, for the ``fdi-sim run`` commands and the study's name
+        (default: ``out_dir``'s parent when it holds ``runs/``, else ``out_dir``).
     confidence : float, optional
         Interval level of the figures (default: the summary's).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    if results_dir is None:
-        results_dir = out.parent if (out.parent / "runs").is_dir() else out
-    results_dir = Path(results_dir).resolve()
+    if study_dir is None:
+        study_dir = out.parent if (out.parent / "runs").is_dir() else out
+    results_dir = Path(study_dir).resolve()
     conf = float(confidence if confidence is not None else summary.get("confidence", 0.95))
     figs = []
     if rescored is not None:
@@ -434,7 +434,7 @@ def write_report(out_dir: str | Path, records: Sequence[Mapping[str, Any]], summ
         figs.append(_img(delay_figure(summary, out / "delays.png"), "Detection delays after the fault onset"))
         figs.append(_img(confusion_figure(summary, out / "confusion.png"),
                          "Confusion: true target (rows) -> isolated as (columns), counts of (run, fault) pairs"))
-    name = _study_name(results_dir)
+    name = str(summary.get("study") or _study_name(results_dir))
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'>",
         f"<title>{_e(name)}: study report</title><style>{CSS}</style></head><body>",

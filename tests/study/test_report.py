@@ -101,7 +101,7 @@ def test_report_without_rescoring_and_without_faults(study, tmp_path):
     free = [r for r in records if not r["faults"]]
     bad = dict(free[0], index=99, status="diverged", reason="nz beyond 9 g at t = 12.3 s", scenario="000099.toml")
     runs = free + [bad]
-    page = P.write_report(tmp_path / "rep", runs, summarize(runs), results_dir=out)
+    page = P.write_report(tmp_path / "rep", runs, summarize(runs), study_dir=out)
     text = page.read_text()
     assert not any((tmp_path / "rep" / f).exists() for f in FIGURES)
     assert "No re-scoring given" in text and "false-alarm study" in text
@@ -109,7 +109,7 @@ def test_report_without_rescoring_and_without_faults(study, tmp_path):
     assert all(v == 0 for v in parse(text).depth.values())
     # a false-alarm-only study with re-scoring: the threshold figure, no ROC
     rs = rescore(free, out, [0.5, 1.0, 2.0])
-    P.write_report(tmp_path / "rep2", free, summarize(free), rs, results_dir=out)
+    P.write_report(tmp_path / "rep2", free, summarize(free), rs, study_dir=out)
     assert (tmp_path / "rep2" / "far_vs_threshold.png").is_file() and not (tmp_path / "rep2" / "roc.png").exists()
 
 
@@ -126,6 +126,6 @@ def test_page_from_results_json_is_the_same(study, tmp_path):
     out, records, summary, _ = study
     free = [r for r in records if not r["faults"]][:3]
     s = summarize(free)
-    a = P.write_report(tmp_path / "a", free, s, results_dir=out).read_text()
-    b = P.write_report(tmp_path / "b", free, json.loads(json.dumps(s)), results_dir=out).read_text()
+    a = P.write_report(tmp_path / "a", free, s, study_dir=out).read_text()
+    b = P.write_report(tmp_path / "b", free, json.loads(json.dumps(s)), study_dir=out).read_text()
     assert a == b
