@@ -51,7 +51,19 @@ def cmd_study(args: argparse.Namespace) -> int:
     if not args.no_report:
         from fdi_sim.study.report import write_report
 
-        page = write_report(out / "report", recs, summary, study_dir=out)
+        rescored = None
+        if any(r.get("log") for r in recs):  # ROC and threshold figures from the stored statistics
+            import numpy as np
+
+            from fdi_sim.study.rescore import rescore
+
+            from fdi_sim.errors import StudyError
+
+            try:
+                rescored = rescore(recs, out, np.geomspace(0.25, 4.0, 25))
+            except StudyError as exc:  # e.g. the angle-magnitude rule: no re-scoring, the rest of the report
+                print(f"note: no ROC or threshold figures ({exc})", file=sys.stderr)
+        page = write_report(out / "report", recs, summary, rescored, study_dir=out)
         print(f"report     {page}", file=sys.stderr)
     if args.json:
         print(json.dumps(summary, default=_jsonable))

@@ -236,6 +236,15 @@ def fly_run(index: int, scenario_json: str, source: str, time_limit_s: float, ke
             status = "timeout"
         rec.update(record_from_summary(s, sc))
         rec.update(status=status, reason=reason, wall_s=s.wall_s)
+        if sc.faults and path.is_file():  # the injector's catalog: labels and the true fault windows
+            from fdi_sim.flightlog import METADATA_FAULTS, read_log
+
+            cat = json.loads(read_log(path).metadata.get(METADATA_FAULTS, {}).get("catalog", "[]"))
+            if cat:
+                rec["faults"] = cat
+                types = {c["label"]: c["type"] for c in cat}
+                for d in rec["detections"]:
+                    d["type"] = types.get(d["fault"])
         if keep_log and path.is_file():
             log = path.read_bytes()
             rec["log"] = f"{run_name(index)}.mcap"
@@ -348,7 +357,7 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
         return StudyOutcome(out, total, len(done), 0, 0, False, 0.0, 0.0)
     planned = [(i, *study.run_scenario(i)) for i in todo]
     groups, keys = design_groups([sc for _, sc, _ in planned])
-    if len(groups) > max(8, len(todo) // 4):
+    if len(groups) > max(32, len(todo) // 4):  # a grid has tens of nodes; one design per run is the mistake
         raise StudyError(study.source, "bank.design", f"the runs need {len(groups)} different bank designs "
                          f"(one per sampled value of a key the bank is designed for): each is calibrated on "
                          f"{study.base.model.fdi.calibration_flights if 'calibration_flights' not in study.model.bank else study.model.bank['calibration_flights']} "
