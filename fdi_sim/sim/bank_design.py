@@ -51,6 +51,10 @@ IN_LOOP: dict[str, str] = {
 }
 #: thresholds meet the per-sample target with this confidence (flight-level bootstrap)
 THRESHOLD_CONFIDENCE = 0.95
+#: per-process memo of gust-filter schedules (design scenario -> schedule, note), or None (off): a
+#: Monte Carlo worker turns it on (fdi_sim.study.execute.fly_run): the design (DARE, linearization,
+#: 0.25 s) was 3/4 of a short run's set-up; off elsewhere, so a changed cache is always read again
+DESIGN_MEMO: dict[str, tuple[Any, str]] | None = None
 #: keys of a [[detectors]] entry that are not design options
 ENTRY_KEYS = ("type", "n_flights", "duration_s", "target")
 
@@ -178,7 +182,7 @@ def design_scenario(sc: Scenario) -> Scenario:
         what.append(f"noise scale {d.noise_scale:g}")
     # the design conditions are the design; a flight-specific name, seed or duration is not
     data["fdi"] = {**data["fdi"], "design": {}}
-    data.update(name=f"{sc.aircraft}_design", description="", seed=0)
+    data.update(name=f"{sc.aircraft}_design", description="", seed=0, faults=[])
     return from_dict(data, source=f"{sc.source} (bank design at {', '.join(what)})")
 
 
@@ -220,6 +224,18 @@ def _gust_stream(sc: Scenario, m: MemberSpec, *, progress: bool, training_logs: 
     min_cos = float(m.params.get("min_cosine", 0.7))
     from fdi_sim.sim.designs import design_schedule, schedule_points
 
+    memo_key = None
+    if DESIGN_MEMO is not None:  # a study worker: the same design for many runs, made once per process
+        from fdi_sim.sim.calibrate import cache_dir
+
+        d = json.loads(sc.to_json())
+        for k in ("seed", "name", "description", "faults"):  # the design sees no faults
+            d.pop(k, None)
+        memo_key = hashlib.sha256(json.dumps([d, m.id, sorted(m.params.items()), str(cache_dir())], sort_keys=True,
+                                             default=str).encode()).hexdigest()
+        if memo_key in DESIGN_MEMO:
+            sched, note = DESIGN_MEMO[memo_key]
+            return GustKalmanStream(sched, min_cosine=min_cos, id=m.id), note
     points = schedule_points(sc) if f.schedule == "auto" else []
     if len(points) > 1:
         sched = design_schedule(sc, points, rate_hz=f.rate_hz, params=design_opts, on_failure=f.on_design_failure,
@@ -235,6 +251,8 @@ def _gust_stream(sc: Scenario, m: MemberSpec, *, progress: bool, training_logs: 
                               f"(h {sc.model.initial.h_ft:g} ft): {exc}") from None
         sched = GustKalmanSchedule.single(det.design, det.calibration)
         note = f"{m.id}: one design at the initial point ({sched.label(0)})"
+    if memo_key is not None:
+        DESIGN_MEMO[memo_key] = (sched, note)  # the stream copies what it needs: the schedule is not changed
     return GustKalmanStream(sched, min_cosine=min_cos, id=m.id), note
 
 

@@ -217,6 +217,10 @@ def fly_run(index: int, scenario_json: str, source: str, time_limit_s: float, ke
         worker = get_worker().address
     except (ImportError, ValueError):
         worker = "local"
+    from fdi_sim.sim import bank_design
+
+    if bank_design.DESIGN_MEMO is None:
+        bank_design.DESIGN_MEMO = {}  # this process flies runs of shared designs
     sc = from_dict(json.loads(scenario_json), source=source)
     rec: dict[str, Any] = {"index": int(index), "seed": int(sc.seed), "scenario": f"{run_name(index)}.toml",
                            "params": params, "duration_s": float(sc.duration_s), "worker": worker}
