@@ -21,7 +21,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -189,24 +189,14 @@ class RunSummary:
         if self.fdi_detectors:
             lines.append(f"fdi bank   {', '.join(self.fdi_detectors)}")
             lines += [f"           {n}" for n in self.fdi_notes]
-            for d in self.fdi_detections:
-                if d.detected_t_s is None:
-                    lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} not detected")
-                else:
-                    iso = d.isolation or "not isolated"
-                    mark = "" if d.isolation_correct is None else (" (right)" if d.isolation_correct else " (wrong)")
-                    lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} detected at "
-                                 f"{d.detected_t_s:.2f} s (delay {d.delay_s:.2f} s), isolated as {iso}{mark}")
+            out = fdi_outcome_lines(self.fdi_detections, self.fdi_false_alarms)
+            n_det = len(self.fdi_detections)
+            lines += out[:n_det]
             for r in self.fdi_reconfigurations:
                 extra = (f", effectiveness {r['effectiveness']:.2f} +- {r['effectiveness_std']:.2f}, command x "
                          f"{r['scale']:.2f}" if "scale" in r else "")
                 lines.append(f"  reconfigured {r['sensor']} at {r['t_s']:.2f} s ({r['action']}, by {r['detector']}{extra})")
-            if self.fdi_false_alarms:
-                for a in self.fdi_false_alarms:
-                    end = "open" if a.end_t_s is None else f"to {a.end_t_s:.2f} s"
-                    lines.append(f"  FALSE ALARM {a.detector} at {a.onset_t_s:.2f} s ({end}), isolated as {a.isolation}")
-            else:
-                lines.append("  false alarms: none")
+            lines += out[n_det:]
         return "\n".join(lines)
 
 
@@ -217,6 +207,32 @@ class RunResult:
     log_path: Path
     status: str
     summary: RunSummary
+
+
+def component_seeds(seed: int) -> tuple[np.random.SeedSequence, ...]:
+    """A run's random streams from its scenario seed, one per component, in this order: sensors,
+    pilot, JSBSim, faults, FDI (the one place that says so; an open-loop replay draws the faults'
+    stream from here to match the loop)."""
+    return tuple(np.random.SeedSequence(int(seed)).spawn(5))
+
+
+def fdi_outcome_lines(detections: Sequence[FaultDetection], false_alarms: Sequence[BankAlarm]) -> list[str]:
+    """The summary lines of the bank's detections per fault and member, and its false alarms."""
+    lines = []
+    for d in detections:
+        if d.detected_t_s is None:
+            lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} not detected")
+        else:
+            iso = d.isolation or "not isolated"
+            mark = "" if d.isolation_correct is None else (" (right)" if d.isolation_correct else " (wrong)")
+            lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} detected at "
+                         f"{d.detected_t_s:.2f} s (delay {d.delay_s:.2f} s), isolated as {iso}{mark}")
+    for a in false_alarms:
+        end = "open" if a.end_t_s is None else f"to {a.end_t_s:.2f} s"
+        lines.append(f"  FALSE ALARM {a.detector} at {a.onset_t_s:.2f} s ({end}), isolated as {a.isolation}")
+    if not false_alarms:
+        lines.append("  false alarms: none")
+    return lines
 
 
 def _versions() -> dict[str, str]:
@@ -330,8 +346,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     check_log_path(out, sc.source, force=force)
     # one stream per component; the fault and FDI streams are spawned now so that adding faults or
     # detectors to a scenario never changes the sensor noise or the turbulence of the same seed
-    seeds = np.random.SeedSequence(sc.seed)
-    ss_sensors, ss_pilot, ss_jsbsim, ss_faults, _ss_fdi = seeds.spawn(5)
+    ss_sensors, ss_pilot, ss_jsbsim, ss_faults, _ss_fdi = component_seeds(sc.seed)
     jsbsim_seed = int(ss_jsbsim.generate_state(1)[0] % (2**31 - 1))
     metadata = {
         METADATA_SCENARIO: {"name": sc.name, "seed": str(sc.seed), "source": sc.source, "text": sc.text,
@@ -455,8 +470,8 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         det, false = fdi_outcomes(bank, faults, t_end_s)
         fdi = dict(fdi_detectors=tuple(m.id for m in bank.members), fdi_detections=det, fdi_false_alarms=false,
                    fdi_reconfigurations=tuple(bank.reconfig_events), fdi_notes=bank.notes,
-                   fdi_alarms=tuple(bank.alarms), fdi_thresholds=tuple(
-                       json.loads(bank_metadata(bank)["members"])[i]["threshold"] for i in range(len(bank.members))))
+                   fdi_alarms=tuple(bank.alarms),
+                   fdi_thresholds=tuple(m["threshold"] for m in json.loads(bank_metadata(bank)["members"])))
     summary = RunSummary(
         scenario=sc.name, aircraft=sc.aircraft, seed=sc.seed, status=status, reason=reason, t_end_s=t_end_s,
         steps=steps,

@@ -62,7 +62,6 @@ SUPERIMPOSABLE = ("sensor",)
 BANKS = ("scenario", "default")
 #: the order ``fdi_sim.sim.run.run`` spawns its streams from SeedSequence(seed): sensors, pilot,
 #: JSBSim, faults, FDI (:func:`loop_fault_rng` takes the faults' one)
-_LOOP_STREAMS, _LOOP_FAULT_STREAM = 5, 3
 
 
 def loop_fault_rng(seed: int) -> np.random.Generator:
@@ -77,7 +76,9 @@ def loop_fault_rng(seed: int) -> np.random.Generator:
     seed : int
         The scenario's ``seed``.
     """
-    return np.random.default_rng(np.random.SeedSequence(int(seed)).spawn(_LOOP_STREAMS)[_LOOP_FAULT_STREAM])
+    from fdi_sim.sim.run import component_seeds
+
+    return np.random.default_rng(component_seeds(seed)[3])
 
 
 @dataclass(frozen=True)
@@ -173,23 +174,14 @@ class SuperimposedResult:
                  f"{'on, bank side only' if self.reconfigure else 'off'})"]
         for f in self.faults:
             lines.append(f"fault      {f['label']}: {f['type']} on {f['target']}, windows {f['windows_s']} s")
-        for d in self.detections:
-            if d.detected_t_s is None:
-                lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} not detected")
-            else:
-                mark = "" if d.isolation_correct is None else (" (right)" if d.isolation_correct else " (wrong)")
-                lines.append(f"  {d.fault:22} onset {d.onset_t_s:.2f} s  {d.detector:24} detected at "
-                             f"{d.detected_t_s:.2f} s (delay {d.delay_s:.2f} s), isolated as "
-                             f"{d.isolation or 'not isolated'}{mark}")
+        from fdi_sim.sim.run import fdi_outcome_lines
+
+        out = fdi_outcome_lines(self.detections, self.false_alarms)
+        lines += out[:len(self.detections)]
         for r in self.reconfigurations:
             lines.append(f"  would reconfigure {r['sensor']} at {r['t_s']:.2f} s ({r['action']}, by {r['detector']}; "
                          "not fed back: open loop)")
-        if self.false_alarms:
-            for a in self.false_alarms:
-                end = "open" if a.end_t_s is None else f"to {a.end_t_s:.2f} s"
-                lines.append(f"  FALSE ALARM {a.detector} at {a.onset_t_s:.2f} s ({end}), isolated as {a.isolation}")
-        else:
-            lines.append("  false alarms: none")
+        lines += out[len(self.detections):]
         return "\n".join(lines)
 
 
