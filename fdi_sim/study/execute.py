@@ -40,7 +40,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from fdi_sim.errors import StudyError
 from fdi_sim.study.spec import Study, design_groups, scenario_toml
@@ -187,7 +187,6 @@ def prepare_design(scenario_json: str, source: str) -> dict[str, Any]:
     """Design and calibrate one bank (cached on the worker's disk); returns its notes or the error."""
     from fdi_sim.errors import FdiSimError
     from fdi_sim.scenario.loader import from_dict
-    from fdi_sim.sensors import SensorSuite  # noqa: F401  (import cost outside the timing)
     from fdi_sim.sim.run import build_loop_bank, build_sensors
 
     sc = from_dict(json.loads(scenario_json), source=source)
@@ -259,8 +258,6 @@ def fly_run(index: int, scenario_json: str, source: str, time_limit_s: float, ke
 
 def record_from_summary(s: Any, sc: Any) -> dict[str, Any]:
     """The metrics of a run record from a :class:`~fdi_sim.sim.run.RunSummary`."""
-    from fdi_sim.sim.bank_design import bank_members
-
     f = sc.model.fdi
 
     def alarm(a: Any) -> dict[str, Any]:
@@ -278,7 +275,7 @@ def record_from_summary(s: Any, sc: Any) -> dict[str, Any]:
         "max_abs_dh_ft": s.max_abs_dh_ft, "max_abs_dvc_kts": s.max_abs_dvc_kts,
         "detectors": list(s.fdi_detectors), "thresholds": dict(zip(s.fdi_detectors, s.fdi_thresholds)),
         "design_far_per_h": f.far_per_h, "rate_hz": f.rate_hz, "persistence": [f.persistence_k, f.persistence_n],
-        "arm_s": f.arm_s, "decision": f.decision, "n_members": len(bank_members(sc)),
+        "arm_s": f.arm_s, "decision": f.decision, "n_members": len(s.fdi_detectors),
         "faults": faults, "fault_labels": sorted(labels),
         "alarms": [alarm(a) for a in s.fdi_alarms], "false_alarms": [alarm(a) for a in s.fdi_false_alarms],
         "detections": [{"fault": d.fault, "target": d.target, "detector": d.detector, "onset_t_s": d.onset_t_s,
@@ -436,10 +433,3 @@ def _bar(total_h: float, progress: bool, name: str) -> Any:
     return tqdm(total=total_h, unit="fh", desc=name, file=sys.stderr, dynamic_ncols=True,
                 bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} flight h "
                            "[{elapsed}<{remaining}, {rate_fmt}] {postfix}")
-
-
-def iter_runs(out_dir: str | Path) -> Iterator[tuple[dict[str, Any], Path | None]]:
-    """Each record with its log path (None without one)."""
-    runs = Path(out_dir) / "runs"
-    for rec in load_records(out_dir):
-        yield rec, (runs / rec["log"]) if rec.get("log") else None
