@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-slow bench venv clean node-tools
+.PHONY: demo test test-slow bench venv clean node-tools browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -27,7 +27,22 @@ $(NODE_TOOLS): tools/foxglove/package-lock.json
 
 node-tools: $(NODE_TOOLS)
 
-test: $(STAMP) node-tools  ## the default suite (under 15 min); long studies are marked slow
+# Debian's chromium for tests/review/test_browser.py (the report rendered in a real browser; playwright
+# drives it, `playwright install` is never used). Installed with apt-get when root; otherwise the
+# command is printed and the browser tests skip, saying why.
+CHROMIUM := /usr/bin/chromium
+browser:
+	@if [ -x $(CHROMIUM) ]; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	  echo "installing Debian's chromium for the browser tests (apt-get)"; \
+	  DEBIAN_FRONTEND=noninteractive apt-get update -q && \
+	  DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium; \
+	else \
+	  echo "$(CHROMIUM) not found: tests/review/test_browser.py will skip;" \
+	       "install it with: sudo apt-get install -y chromium"; \
+	fi
+
+test: $(STAMP) node-tools browser  ## the default suite (under 15 min); long studies are marked slow
 	$(PY) -m pytest -q -n 2 --dist loadfile tests  # two workers (CI has 2 cores); a file stays on one worker (module fixtures)
 
 test-slow: $(STAMP)  ## only the long studies and reproductions
