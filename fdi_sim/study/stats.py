@@ -34,6 +34,16 @@ Definitions (one per number, so that two studies can be compared):
   (Clopper-Pearson intervals), ``mean_detection_time_s`` = mean over the TP flights of the first
   detection's delay after the onset.
 
+- **Overdispersion**: alarms of one member often cluster by run (a flight whose conditions sit
+  near the threshold alarms several times), so the counts vary more between runs than a Poisson
+  process allows and the Garwood interval is too narrow. ``dispersion`` is the Pearson estimate of
+  the quasi-Poisson factor, ``phi = sum_i (k_i - lam e_i)^2 / (lam e_i) / (n - 1)`` with
+  ``lam = sum k / sum e`` over the runs (McCullagh & Nelder 1989, sec. 6.2); ``far_per_h_ci_overdispersed``
+  is the Garwood interval of ``K / phi`` events in ``E / phi`` hours with ``phi`` floored at 1 (the
+  effective number of independent events). Simulated with gamma-mixed rates (200 runs of 20 s,
+  36 /h, shape 0.2), the plain interval covered 86 % and this one 95 % of 2,000 studies
+  (``tests/study/test_stats.py``); use it whenever ``dispersion`` is well above 1.
+
 Probabilities and intervals assume independent runs (they are: seeds from ``SeedSequence``).
 """
 from __future__ import annotations
@@ -43,6 +53,7 @@ from collections import Counter
 from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
+from scipy import stats as scipy_stats
 
 from fdi_sim.decision.intervals import clopper_pearson, poisson_rate_interval
 from fdi_sim.sim.bank import LATE_GRACE_S
@@ -154,6 +165,41 @@ def rate(k: int, exposure_h: float, confidence: float) -> tuple[float | None, li
     return k / exposure_h, _ci(poisson_rate_interval(k, exposure_h, confidence))
 
 
+def dispersion(counts: Sequence[float], exposures: Sequence[float]) -> float | None:
+    """Pearson estimate of the quasi-Poisson dispersion of per-run event counts [-].
+
+    ``phi = sum_i (k_i - lam e_i)^2 / (lam e_i) / (n - 1)``, ``lam = sum k / sum e``, over the runs with
+    exposure; 1 for a Poisson process, above 1 when events cluster by run. None with fewer than two
+    runs or no event.
+    """
+    k, e = np.asarray(counts, dtype=float), np.asarray(exposures, dtype=float)
+    keep = e > 0.0
+    k, e = k[keep], e[keep]
+    if k.size < 2 or k.sum() == 0.0:
+        return None
+    mu = k.sum() / e.sum() * e
+    return float(np.sum((k - mu) ** 2 / mu) / (k.size - 1))
+
+
+def overdispersed_rate(counts: Sequence[float], exposures_h: Sequence[float], confidence: float
+                       ) -> tuple[float | None, list[float] | None, float | None]:
+    """Rate [1/h], its dispersion-scaled Garwood interval [1/h] and the dispersion [-].
+
+    The interval is the exact Poisson interval of ``K / phi`` events in ``E / phi`` hours,
+    ``phi = max(1, dispersion)`` (module docstring); with ``phi = 1`` it is :func:`rate`'s.
+    """
+    k_sum, e_sum = float(np.sum(counts)), float(np.sum(exposures_h))
+    if e_sum <= 0.0:
+        return None, None, None
+    phi = dispersion(counts, exposures_h)
+    scale = max(1.0, phi if phi is not None else 1.0)
+    a = (1.0 - confidence) / 2.0  # Garwood with a non-integer count (chi2 of non-integer dof)
+    k_eff = k_sum / scale
+    lo = 0.0 if k_eff == 0.0 else float(scipy_stats.chi2.ppf(a, 2.0 * k_eff)) / 2.0
+    hi = float(scipy_stats.chi2.ppf(1.0 - a, 2.0 * k_eff + 2.0)) / 2.0
+    return k_sum / e_sum, [lo * scale / e_sum, hi * scale / e_sum], phi
+
+
 def delay_quantiles(delays_s: Sequence[float]) -> tuple[float | None, float | None]:
     """Median and 95th percentile [s] (None without detections)."""
     if not len(delays_s):
@@ -247,6 +293,8 @@ def _block(ident: str, runs: Sequence[Mapping[str, Any]], confidence: float, gra
     n_fa, runs_fa, expo_s, pred_x = 0, 0, 0.0, 0.0
     outcomes: list[dict[str, Any]] = []
     flights = []
+    counts: list[int] = []
+    exposures_h: list[float] = []
     for r in runs:
         e = exposure_s(r, grace_s)
         expo_s += e
@@ -265,6 +313,8 @@ def _block(ident: str, runs: Sequence[Mapping[str, Any]], confidence: float, gra
             oc = _member_outcomes(r, ident)
         n_fa += fa
         runs_fa += fa > 0
+        counts.append(fa)
+        exposures_h.append(e / S_PER_H)
         outcomes += oc
         hit = [o["delay_s"] for o in oc if o["detected_t_s"] is not None]
         flights.append((_first_onset(r), onsets, min(hit) if hit else None))
@@ -274,9 +324,11 @@ def _block(ident: str, runs: Sequence[Mapping[str, Any]], confidence: float, gra
     if predicted is not None and not math.isfinite(predicted):
         predicted = None
     pfa, pfa_ci = proportion(runs_fa, len(runs), confidence)
+    _, far_ci_od, phi = overdispersed_rate(counts, exposures_h, confidence)
     out: dict[str, Any] = {
         "id": ident, "runs": len(runs), "exposure_h": expo_h, "flight_h": sum(float(r.get("flight_h", 0.0)) for r in runs),
         "false_alarms": n_fa, "far_per_h": far, "far_per_h_ci": far_ci, "predicted_far_per_h": predicted,
+        "dispersion": phi, "far_per_h_ci_overdispersed": far_ci_od,
         "prediction_in_ci": None if far_ci is None or predicted is None else bool(far_ci[0] <= predicted <= far_ci[1]),
         "exceeds_prediction": None if far_ci is None or predicted is None else bool(far_ci[0] > predicted),
         "runs_with_false_alarm": runs_fa, "p_false_alarm_per_run": pfa, "p_false_alarm_per_run_ci": pfa_ci,
@@ -317,7 +369,7 @@ def summarize(records: Sequence[Mapping[str, Any]], *, confidence: float = 0.95,
         ``runs``, ``completed``, ``statuses`` (count per status), ``not_completed`` (index, status,
         reason), ``flight_h`` (completed runs) [h], ``flight_h_all`` [h], ``detectors`` (a list, per
         member: ``id``, ``runs``, ``exposure_h``, ``false_alarms``, ``far_per_h``, ``far_per_h_ci``,
-        ``predicted_far_per_h``, ``prediction_in_ci``, ``exceeds_prediction``,
+        ``predicted_far_per_h``, ``dispersion``, ``far_per_h_ci_overdispersed``, ``prediction_in_ci``, ``exceeds_prediction``,
         ``runs_with_false_alarm``, ``p_false_alarm_per_run`` (+ ``_ci``), ``faults``, ``detected``,
         ``p_detect`` (+ ``_ci``), ``delay_s_median``, ``delay_s_p95``, ``delays_s``,
         ``p_isolation_correct`` (+ ``_ci``), ``confusion``, ``wrong_diagnosis_analytic`` (None)
