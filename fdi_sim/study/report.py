@@ -118,10 +118,12 @@ def _comparison(summary: Mapping[str, Any]) -> str:
         name = "<b>bank (any member)</b>" if d["id"] == BANK else f"<code>{_e(d['id'])}</code>"
         a = d["alfa"]
         rows.append([name, _f(d["runs"]), _f(d["false_alarms"]), _f(d["far_per_h"]), _ci(d["far_per_h_ci"]),
+                     _f(d.get("dispersion")), _ci(d.get("far_per_h_ci_overdispersed")),
                      _f(d["predicted_far_per_h"]), _verdict(d), _pct(d["p_false_alarm_per_run"], d["p_false_alarm_per_run_ci"]),
                      f"{d['detected']}/{d['faults']}", _pct(d["p_detect"], d["p_detect_ci"]), _f(d["delay_s_median"]),
                      _f(d["delay_s_p95"]), _pct(d["p_isolation_correct"]), _f(a["precision"]), _f(a["recall"])])
-    hdr = ["detector", "runs", "false alarms", "per flight h", "interval", "predicted", "vs prediction",
+    hdr = ["detector", "runs", "false alarms", "per flight h", "interval", "dispersion",
+           "interval (clustered)", "predicted", "vs prediction",
            "P(false alarm) per run", "detected", "p_detect", "delay median [s]", "delay p95 [s]", "isolation right",
            "ALFA precision", "ALFA recall"]
     return _table(hdr, rows)
