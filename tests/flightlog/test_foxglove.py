@@ -1,7 +1,10 @@
 """Foxglove's own libraries decode every topic of our logs exactly as ``read_log`` does.
 
-The shipped scenarios are flown shortened (8 s) through the CLI, one log is run through
-``fdi-sim detect`` (``/fdi/<id>/statistic``, ``/fdi/alarms``), and each log is decoded by
+The shipped scenarios are flown shortened (8 s) through the CLI (the ten with an ``[fdi]`` table
+fly the default bank in the loop: ``/fdi/<id>/statistic|residual|estimate``, ``/fdi/alarms``,
+``/fdi/failure_log``, ``/fdi/reconfiguration``), the pitch-gyro bias once more for 14 s so the bank
+alarms, isolates and reconfigures (those event channels carry payloads), one log is run through
+``fdi-sim detect`` (``/fdi/offline/...``), and each log is decoded by
 ``tools/foxglove/decode.mjs`` with node: ``@mcap/core`` (indexed reader, zstd/lz4 through
 ``@foxglove/wasm-zstd``/``@foxglove/wasm-lz4``), ``@foxglove/rosmsg`` (ros2msg schema text),
 ``@foxglove/rosmsg2-serialization`` (CDR) and ``JSON.parse`` + ``ajv`` (JSON channels against
@@ -51,6 +54,12 @@ t_start_s = 2.0
 intermittent = { windows_s = [[2.0, 3.0], [5.0, 6.5]] }
 """
 DETECTOR = "kalman-nis-v1:sensor_std=0.01"
+#: a bank scenario flown long enough for its bank to alarm (11.05 s), log failures and reconfigure (11.5 s)
+ALARMED = "f16_pitch_gyro_bias"
+ALARMED_S = 14.0
+#: the shipped scenarios with an [fdi] table: their 8 s logs hold the bank's topics
+BANK_SCENARIOS = tuple(name for name in SCENARIOS
+                       if "\n[fdi]" in (ROOT / "scenarios" / f"{name}.toml").read_text())
 
 
 def _node_modules_stale() -> bool:
@@ -78,25 +87,51 @@ def _cli(*args: str) -> None:
     assert done.returncode == 0, f"fdi-sim {' '.join(args)} failed:\n{done.stdout}\n{done.stderr}"
 
 
-@pytest.fixture(scope="session")
-def flown_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """The shipped scenarios flown for 8 s, a dropout variant, and a ``detect`` output log."""
+#: the shipped logs of this process, flown once (tests/review/test_foxglove_layout.py shares them)
+_FLOWN: dict[str, Path] = {}
+
+
+def shipped_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The shipped scenarios flown for 8 s, the gyro bias for ``ALARMED_S`` (key ``"alarmed"``),
+    a dropout variant and a ``detect`` output log; flown once per process.
+
+    Parameters
+    ----------
+    tmp_path_factory : pytest.TempPathFactory
+        Where the logs go (a fresh ``foxglove`` folder the first time).
+
+    Returns
+    -------
+    dict of str to Path
+        Scenario stem (or ``"alarmed"``, ``"dropout"``, ``"detect"``) to MCAP path.
+    """
+    if _FLOWN:
+        return dict(_FLOWN)
     out = tmp_path_factory.mktemp("foxglove")
     logs: dict[str, Path] = {}
     jobs = []
     for name in SCENARIOS:
         logs[name] = out / f"{name}.mcap"
-        jobs.append((str(ROOT / "scenarios" / f"{name}.toml"), logs[name]))
+        jobs.append((str(ROOT / "scenarios" / f"{name}.toml"), logs[name], DURATION_S))
     dropout = out / "dhc6_intermittent_aoa_dropout.toml"
     dropout.write_text((ROOT / "scenarios" / "dhc6_intermittent_aoa.toml").read_text() + DROPOUT_FAULT)
     logs["dropout"] = out / "dropout.mcap"
-    jobs.append((str(dropout), logs["dropout"]))
+    jobs.append((str(dropout), logs["dropout"], DURATION_S))
+    logs["alarmed"] = out / "alarmed.mcap"
+    jobs.append((str(ROOT / "scenarios" / f"{ALARMED}.toml"), logs["alarmed"], ALARMED_S))
     with ThreadPoolExecutor(max_workers=max(2, os.cpu_count() or 2)) as pool:
-        list(pool.map(lambda job: _cli("run", job[0], "--log", str(job[1]), "--duration", str(DURATION_S),
+        list(pool.map(lambda job: _cli("run", job[0], "--log", str(job[1]), "--duration", str(job[2]),
                                        "--quiet"), jobs))
     logs["detect"] = out / "detect.mcap"
     _cli("detect", str(logs["dropout"]), "--detector", DETECTOR, "--out", str(logs["detect"]))
-    return logs
+    _FLOWN.update(logs)
+    return dict(logs)
+
+
+@pytest.fixture(scope="session")
+def flown_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The logs of :func:`shipped_logs`."""
+    return shipped_logs(tmp_path_factory)
 
 
 def decode(node: str, path: Path, *extra: str) -> dict[str, Any]:
@@ -164,7 +199,7 @@ def assert_same_as_read_log(fox: dict[str, Any], log: FlightLog) -> None:
             assert got["schema_errors"] == [], f"{where}: ajv rejects messages: {got['schema_errors']}"
 
 
-LOG_IDS = (*SCENARIOS, "dropout", "detect")
+LOG_IDS = (*SCENARIOS, "dropout", "alarmed", "detect")
 
 
 @pytest.mark.parametrize("which", LOG_IDS)
@@ -174,7 +209,22 @@ def test_foxglove_decodes_every_topic_like_read_log(node: str, flown_logs: dict[
     assert_same_as_read_log(fox, log)
     # the logs hold what this test claims to cover
     assert {"/truth/state", "/sensors/measurements", "/commands/pilot", "/sim/status"} <= set(fox["topics"])
-    assert fox["topics"]["/truth/state"]["count"] == round(DURATION_S * 120) + 1
+    duration_s = ALARMED_S if which == "alarmed" else DURATION_S
+    assert fox["topics"]["/truth/state"]["count"] == round(duration_s * 120) + 1
+    if which in BANK_SCENARIOS or which in ("dropout", "alarmed", "detect"):
+        # the bank flew in the loop: every member's outputs and the bank's event channels
+        members = [m["id"] for m in json.loads(log.metadata["fdi"]["members"])]
+        stats = {t for t in fox["topics"] if t.startswith("/fdi/") and t.endswith("/statistic")
+                 and not t.startswith("/fdi/offline/")}
+        assert len(members) >= 5 and stats == {f"/fdi/{m}/statistic" for m in members}, which
+        assert {"/fdi/alarms", "/fdi/failure_log", "/fdi/reconfiguration",
+                "/fdi/kalman-gust-v1/residual", "/fdi/kalman-gust-v1/estimate"} <= set(fox["topics"]), which
+    if which == "alarmed":
+        # Foxglove decodes real alarm, failure-log and reconfiguration payloads, not empty channels
+        for topic in ("/fdi/alarms", "/fdi/failure_log", "/fdi/reconfiguration", "/faults/events"):
+            assert fox["topics"][topic]["count"] > 0, f"{topic} is empty in the {ALARMED_S} s gyro-bias run"
+        actions = [m["payload"]["action"] for m in fox["topics"]["/fdi/reconfiguration"]["messages"]]
+        assert actions == ["exclude-and-correct"]
     if which == "dropout":
         valid = log.topics["/sensors/valid"]["q_radps"]
         assert 0.0 in valid and 1.0 in valid
