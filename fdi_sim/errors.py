@@ -130,3 +130,27 @@ class StudyError(ScenarioError):
 
     Same fields as :class:`ScenarioError`; ``source`` is the study file or the results folder.
     """
+
+
+class ReviewError(FdiSimError, ValueError):
+    """A log cannot be reviewed, two logs cannot be compared, or the report cannot be written.
+
+    Parameters
+    ----------
+    source : str
+        The log path (or the report path).
+    problem : str
+        What is wrong or missing.
+    fix : str, optional
+        What to do instead.
+    """
+
+    def __init__(self, source: str, problem: str, fix: str = "") -> None:
+        self.source, self.problem, self.fix = str(source), problem, fix
+        msg = f"{source}: {problem}"
+        if fix:
+            msg += f". Fix: {fix}"
+        super().__init__(msg)
+
+    def __reduce__(self) -> tuple:
+        return (ReviewError, (self.source, self.problem, self.fix))
