@@ -1,4 +1,4 @@
-"""``fdi-sim``: run | detect | study | scenarios | plugins | info | verify | repair | linearize.
+"""``fdi-sim``: run | detect | review | study | scenarios | plugins | info | verify | repair | linearize.
 
 Exit codes: 0 success, 1 a run that diverged or was interrupted (or a log that `verify` finds
 damaged), 2 bad input (one paragraph, no traceback).
@@ -117,6 +117,45 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_review(args: argparse.Namespace) -> int:
+    import time
+    import webbrowser
+
+    from fdi_sim.review.compare import compare_reviews
+    from fdi_sim.review.figures import report_sections
+    from fdi_sim.review.html_report import write_report
+    from fdi_sim.review.run_review import open_log, review_flight_log
+
+    paths = [args.log] + ([args.log2] if args.log2 else [])
+    if len(paths) == 2 and Path(paths[0]).resolve() == Path(paths[1]).resolve():
+        from fdi_sim.errors import ReviewError
+
+        raise ReviewError(paths[1], "the same file as the first log", "give two different logs of one scenario")
+    t0 = time.perf_counter()
+    opened = [open_log(p) for p in paths]
+    t1 = time.perf_counter()
+    reviews = [review_flight_log(log, str(p), notes) for p, (log, notes) in zip(paths, opened)]
+    logs = [log for log, _ in opened]
+    comp = compare_reviews(reviews[0], reviews[1], tuple(logs)) if len(reviews) == 2 else None
+    t2 = time.perf_counter()
+    sections = report_sections(logs, ["A", "B"] if comp else [Path(paths[0]).stem])
+    t3 = time.perf_counter()
+    out = write_report(reviews, logs, args.out, sections=sections, changes=comp.scenario_changes if comp else ())
+    t4 = time.perf_counter()
+    if args.json:
+        doc = comp.to_dict() if comp else reviews[0].to_dict()
+        print(json.dumps({**doc, "report": str(out)}, indent=1))
+    elif not args.quiet:
+        print(comp.format() if comp else reviews[0].format())
+    if not args.json:
+        print(f"report       {out} ({out.stat().st_size / 1e6:.2f} MB)")
+        print(f"took         {t4 - t0:.2f} s (read {t1 - t0:.2f}, metrics {t2 - t1:.2f}, figures {t3 - t2:.2f}, "
+              f"write {t4 - t3:.2f})")
+    if args.open:
+        webbrowser.open(out.resolve().as_uri())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fdi-sim", description="Aircraft fault detection and isolation testbed on JSBSim.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -152,6 +191,16 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", default=None, help="write the input's topics plus /fdi/... to this MCAP file")
     d.add_argument("--json", action="store_true", help="print the result as one JSON object")
     d.set_defaults(func=_cmd_detect)
+    rv = sub.add_parser("review", help="review a run from its log (summary + self-contained HTML report); "
+                        "two logs of one scenario: a comparison")
+    rv.add_argument("log", help="MCAP log written by `fdi-sim run` (a cut-off one is read from a repaired copy)")
+    rv.add_argument("log2", nargs="?", default=None, help="a second log of the same scenario: compare the two")
+    rv.add_argument("--out", default=None, help="report path or folder (default: <stem>.review.html next to the "
+                    "log; <stemA>_vs_<stemB>.review.html for two)")
+    rv.add_argument("--open", action="store_true", help="open the report in the web browser")
+    rv.add_argument("--json", action="store_true", help="print the review (or comparison) as JSON")
+    rv.add_argument("--quiet", action="store_true", help="print only the report path and the time taken")
+    rv.set_defaults(func=_cmd_review)
     rp = sub.add_parser("repair", help="rebuild a log cut off by a crash")
     rp.add_argument("log")
     rp.add_argument("--out", default=None, help="repaired file (default: <stem>.repaired.mcap)")
