@@ -113,11 +113,20 @@ class FdiSection(_Section):
     calibration_flights: int = Field(default=24, ge=2, le=1000)
     calibration_duration_s: float = Field(default=300.0, ge=10.0, le=36000.0)
     design: FdiDesignSection = FdiDesignSection()
+    thresholds: str = Field(
+        default="default", min_length=1, description="where the members' thresholds come from: \"trained\" (the "
+        "bank's own training flights), \"shipped\" (the aircraft's calibration-study file, "
+        "fdi_sim.sim.bank_design.shipped_thresholds_path), a path to such a TOML file (relative to the scenario "
+        "file), or \"default\" (per aircraft: fdi_sim.sim.bank_design.DEFAULT_THRESHOLDS)")
 
     @model_validator(mode="after")
     def _kn(self) -> "FdiSection":
         if self.persistence_k > self.persistence_n:
             raise ValueError(f"persistence_k = {self.persistence_k} exceeds persistence_n = {self.persistence_n}")
+        if self.thresholds not in ("default", "trained", "shipped") and not self.thresholds.endswith(".toml"):
+            raise ValueError(f"thresholds = {self.thresholds!r}: give \"default\", \"trained\", \"shipped\" or the "
+                             "path of a thresholds file ending in .toml (`fdi-sim study STUDY --calibrate OUT.toml` "
+                             "writes one)")
         return self
 
 

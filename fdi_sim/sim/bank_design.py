@@ -137,8 +137,149 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
                    sim_rate_hz=float(sc.model.rate_hz), rate_hz=f.rate_hz, block_samples=S, decision=decision,
                    reconfigure=f.reconfigure, pilot_sensors=pilot_sensors, notes=tuple(notes), arm_s=f.arm_s)
     p = per_sample_target(f.far_per_h, len(streams), f.rate_hz)
-    calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
+    path, explicit = thresholds_source(sc)
+    if path is not None:
+        note = apply_study_thresholds(sc, bank, path, explicit=explicit)
+        if note is None:  # the default's file does not cover this design: trained, and the log says why
+            calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
+            bank.calibration = {**bank.calibration, "source": "trained", "note": note_no_match(sc, path)}
+    else:
+        calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
     return bank
+
+
+# --- thresholds from a calibration study ------------------------------------------------------------
+#: ``[fdi] thresholds = "default"`` per aircraft: "trained" (the bank's own training flights) or
+#: "shipped" (:func:`shipped_thresholds_path`, where it covers the bank's design; trained elsewhere)
+DEFAULT_THRESHOLDS: dict[str, str] = {"f16": "trained", "DHC6": "trained"}
+
+
+def shipped_thresholds_path(aircraft: str) -> Path:
+    """``aircraft/<aircraft>/fdi_thresholds.toml``: the thresholds the aircraft's calibration study gave."""
+    from fdi_sim.data import aircraft_file
+    from fdi_sim.sim.calibrate import THRESHOLDS_FILE
+
+    return aircraft_file(aircraft, THRESHOLDS_FILE)
+
+
+def thresholds_source(sc: Scenario) -> tuple[Path | None, bool]:
+    """Where ``[fdi] thresholds`` takes the thresholds from: a thresholds file (None: the training
+    flights), and whether the scenario named it (a mismatch is then an error, not trained thresholds).
+
+    Raises
+    ------
+    ScenarioError
+        ``"shipped"`` for an aircraft without a shipped file.
+    """
+    mode = sc.model.fdi.thresholds
+    explicit = mode != "default"
+    if mode == "default":
+        mode = DEFAULT_THRESHOLDS.get(sc.aircraft, "trained")
+    if mode == "trained":
+        return None, explicit
+    if mode == "shipped":
+        path = shipped_thresholds_path(sc.aircraft)
+        if not path.is_file():
+            if not explicit:
+                return None, False
+            raise ScenarioError(sc.source, "fdi.thresholds", f"no shipped thresholds file for the {sc.aircraft} "
+                                f"({path} does not exist)", 'use thresholds = "trained", or give the path of a file '
+                                "written by `fdi-sim study STUDY --calibrate OUT.toml`")
+        return path, explicit
+    path = Path(mode)
+    if not path.is_absolute():
+        base = Path(sc.source.split(" (")[0]).parent if sc.source and not sc.source.startswith("<") else Path(".")
+        path = base / path if (base / path).is_file() or not path.is_file() else path
+    return path, True
+
+
+def design_hash(bank: Any) -> str:
+    """Hash of what the members' statistics depend on (not their thresholds): per member its id,
+    the gust filter's matrices, gains, window, ``Sigma_m^-1`` and schedule points, a kinematic
+    check's design; and the bank's rate and measurement columns."""
+    h = hashlib.sha256()
+    h.update(json.dumps([bank.rate_hz, list(bank.meas_names)], default=str).encode())
+    for mem in bank.members:
+        h.update(mem.id.encode())
+        st = mem.stream
+        if hasattr(st, "_A"):
+            for a in (st._A, st._B, st._C, st._D, st._L, st._G, st._Si, st.schedule.points):
+                h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+            h.update(str(st.window_n).encode())
+        else:
+            h.update(repr(getattr(st, "design", getattr(st, "det", ""))).encode())
+    return h.hexdigest()[:24]
+
+
+def design_node(sc: Scenario) -> dict[str, Any]:
+    """The bank's design conditions (of :func:`design_scenario`): node, turbulence, wind, noise scale."""
+    from fdi_sim.sim.designs import initial_vc_kts
+
+    d = design_scenario(sc)
+    return {"h_ft": float(d.model.initial.h_ft), "vc_kts": round(float(initial_vc_kts(d)), 6),
+            "turbulence": d.model.atmosphere.turbulence, "wind_speed_kts": float(d.model.atmosphere.wind_speed_kts),
+            "noise_scale": float(d.model.sensors.noise_scale)}
+
+
+def note_no_match(sc: Scenario, path: Path) -> str:
+    n = design_node(sc)
+    return (f"thresholds = \"default\": {path} does not cover this bank's design (h {n['h_ft']:g} ft, vc "
+            f"{n['vc_kts']:g} kt, {n['turbulence']} turbulence): trained thresholds")
+
+
+def apply_study_thresholds(sc: Scenario, bank: Any, path: Path, *, explicit: bool = True) -> str | None:
+    """Set the members' thresholds from a thresholds file where it matches the bank (aircraft,
+    design node, member ids, design hash, rate and k-of-n rule); record the method per member.
+
+    Returns None (nothing set) for a mismatch when ``explicit`` is False (``thresholds = "default"``).
+
+    Raises
+    ------
+    ScenarioError
+        A mismatch when the scenario named the file (``explicit``): names the file, the key, what
+        differs and the fix.
+    """
+    from fdi_sim.sim.calibrate import read_thresholds
+
+    t = read_thresholds(path)
+    f = sc.model.fdi
+    node = design_node(sc)
+    want = {"aircraft": (t.aircraft, sc.aircraft),
+            "design node": ((t.design_h_ft, t.design_vc_kts, t.design_turbulence, t.design_wind_speed_kts,
+                             t.design_noise_scale),
+                            (node["h_ft"], node["vc_kts"], node["turbulence"], node["wind_speed_kts"],
+                             node["noise_scale"])),
+            "members": ([m.id for m in t.members], [m.id for m in bank.members]),
+            "decision": ((t.rate_hz, t.persistence_k, t.persistence_n),
+                         (float(f.rate_hz), f.persistence_k, f.persistence_n))}
+    bad = [(k, a, b) for k, (a, b) in want.items() if (round(a, 6) if isinstance(a, float) else a) !=
+           (round(b, 6) if isinstance(b, float) else b)]
+    if not bad:
+        h = design_hash(bank)
+        if h != t.design_hash:
+            bad = [("design hash", t.design_hash, h)]
+    if bad:
+        if not explicit:
+            return None
+        k, a, b = bad[0]
+        raise ScenarioError(sc.source, "fdi.thresholds", f"the thresholds file {path} does not match this bank: its "
+                            f"{k} is {a}, the bank's is {b} (the file holds thresholds of study {t.study}'s bank, "
+                            f"designed at h {t.design_h_ft:g} ft, vc {t.design_vc_kts:g} kt, {t.design_turbulence} "
+                            "turbulence)", 'use thresholds = "trained" (the bank\'s own training flights), set [fdi.design] '
+                            f"to the file's design (e.g. design = {{ point = \"grid\", turbulence = \"{t.design_turbulence}\" }} "
+                            "at a point of that node), or calibrate a study at this bank's design with "
+                            "`fdi-sim study STUDY --calibrate OUT.toml`")
+    rec = {"source": "study", "file": str(path), "study": t.study, "study_identity": t.study_identity,
+           "runs": t.runs, "flight_h": t.flight_h, "design_hash": t.design_hash, "far_per_h": t.far_per_h,
+           "members": []}
+    for mem, m in zip(bank.members, t.members):
+        mem.set_threshold(float(m.threshold))
+        rec["members"].append({"id": m.id, "threshold": m.threshold, "method": t.member_method(m.id),
+                               "trained_threshold": m.trained_threshold})
+    bank.calibration = rec
+    bank.keep_trace(False)
+    bank.reset()
+    return rec["members"][0]["method"] if rec["members"] else ""
 
 
 def design_scenario(sc: Scenario) -> Scenario:

@@ -1,4 +1,5 @@
-"""Calibrate detectors on fault-free training flights of a scenario (and cache the result).
+"""Calibrate detectors on fault-free training flights of a scenario (and cache the result); the
+thresholds file a calibration study writes (:class:`StudyThresholds`, read by the bank).
 
 A detector's threshold is only as good as the flights it was set on. Here the training flights
 are the scenario itself with its faults removed, flown with seeds that the scenario's own runs do
@@ -223,3 +224,240 @@ def gust_kalman_calibration(sc: Scenario, model: Any, *, rate_hz: float = 20.0,
     assert cal is not None
     detector = GustKalmanDetector(det.design, cal, min_cosine=det.min_cosine, use_analytic_threshold=det.use_analytic)
     return CachedCalibration(detector, key, path, cached, time.perf_counter() - t0)
+
+
+# --- thresholds from a calibration study (the file `fdi-sim study STUDY --calibrate OUT.toml` writes) ---
+#: the ``kind`` of a thresholds file
+THRESHOLDS_KIND = "fdi-thresholds"
+#: the shipped file's name in ``aircraft/<aircraft>/`` (package data)
+THRESHOLDS_FILE = "fdi_thresholds.toml"
+
+
+@dataclass(frozen=True)
+class HeldRate:
+    """False alarms of one member (or of the bank) on one half of a study's runs.
+
+    Attributes
+    ----------
+    runs : int
+    false_alarms : int
+    exposure_h : float
+        Armed fault-free flight hours [h].
+    far_per_h : float
+        ``false_alarms / exposure_h`` [1/h].
+    ci_per_h : tuple of float
+        Exact Poisson interval at the file's confidence [1/h].
+    target_inside : bool
+        The target rate lies in ``ci_per_h``.
+    """
+
+    runs: int
+    false_alarms: int
+    exposure_h: float
+    far_per_h: float
+    ci_per_h: tuple[float, float]
+    target_inside: bool
+
+
+@dataclass(frozen=True)
+class StudyMemberThreshold:
+    """One member's threshold calibrated on a study.
+
+    Attributes
+    ----------
+    id : str
+    threshold : float
+        The calibrated threshold on the member's statistic [-].
+    trained_threshold : float
+        The threshold the study's runs flew (the bank's training flights) [-].
+    scale : float
+        ``threshold / trained_threshold`` [-].
+    target_per_h : float
+        The member's share of the bank's rate [1/h].
+    calibration, held_out : HeldRate
+        On the calibration half at ``threshold``, and on the held-out half.
+    """
+
+    id: str
+    threshold: float
+    trained_threshold: float
+    scale: float
+    target_per_h: float
+    calibration: HeldRate
+    held_out: HeldRate
+
+
+@dataclass(frozen=True)
+class StudyThresholds:
+    """A thresholds file: a default bank's thresholds from a calibration study, with provenance.
+
+    Attributes
+    ----------
+    aircraft : str
+    study, study_identity : str
+        The study's name and identity hash (``study.json`` of its results folder).
+    runs : int
+        Completed runs used (both halves).
+    flight_h : float
+        Their flight hours [h].
+    version : str
+        fdi-sim version that wrote the file.
+    design_h_ft, design_vc_kts : float
+        The bank's design node [ft], [kt].
+    design_turbulence : str
+    design_wind_speed_kts, design_noise_scale : float
+        [kt], [-].
+    design_hash : str
+        :func:`fdi_sim.sim.bank_design.design_hash` of the bank the study flew.
+    rate_hz : float
+        Detector rate [Hz].
+    persistence_k, persistence_n : int
+        The decision rule the thresholds were calibrated with.
+    far_per_h : float
+        The bank's target rate [1/h]; each member's is ``far_per_h / members``.
+    split : str
+        ``even``: calibrated on the even run indices, held out the odd ones.
+    confidence : float
+    members : tuple of StudyMemberThreshold
+    bank_calibration, bank_held_out : HeldRate
+        The bank (OR of its members at their thresholds) against ``far_per_h``.
+    method : str
+    """
+
+    aircraft: str
+    study: str
+    study_identity: str
+    runs: int
+    flight_h: float
+    version: str
+    design_h_ft: float
+    design_vc_kts: float
+    design_turbulence: str
+    design_wind_speed_kts: float
+    design_noise_scale: float
+    design_hash: str
+    rate_hz: float
+    persistence_k: int
+    persistence_n: int
+    far_per_h: float
+    split: str
+    confidence: float
+    members: tuple[StudyMemberThreshold, ...]
+    bank_calibration: HeldRate
+    bank_held_out: HeldRate
+    method: str
+
+    def member_method(self, member_id: str) -> str:
+        """The method string a bank records for a member that uses this file's threshold."""
+        m = next(x for x in self.members if x.id == member_id)
+        h = m.held_out
+        return (f"calibration study {self.study} ({self.runs} runs, {self.flight_h:.1f} h), held-out rate "
+                f"{h.far_per_h:.3g} per h [{h.ci_per_h[0]:.3g}, {h.ci_per_h[1]:.3g}] ({h.false_alarms} in "
+                f"{h.exposure_h:.1f} h, target {m.target_per_h:.3g}; calibrated on the {self.split} runs: "
+                f"{m.calibration.false_alarms} in {m.calibration.exposure_h:.1f} h; study {self.study_identity})")
+
+
+def _strict(cls: type, d: Any, source: str, where: str) -> dict[str, Any]:
+    """``d``'s keys must be exactly ``cls``'s fields (the file is strict data)."""
+    from dataclasses import fields
+
+    from fdi_sim.errors import ScenarioError
+
+    if not isinstance(d, dict):
+        raise ScenarioError(source, where, f"expected a table, got {type(d).__name__}",
+                            "write the file with `fdi-sim study STUDY --calibrate OUT.toml`")
+    names = [f.name for f in fields(cls)]
+    extra = sorted(set(d) - set(names))
+    missing = [n for n in names if n not in d]
+    if extra or missing:
+        key = f"{where}.{(extra or missing)[0]}" if where else (extra or missing)[0]
+        raise ScenarioError(source, key, ("unknown key" + "s" * (len(extra) > 1) + f" {', '.join(extra)}" if extra
+                                          else f"missing key{'s' * (len(missing) > 1)} {', '.join(missing)}"),
+                            f"a thresholds file has exactly the keys {', '.join(names)}; write it again with "
+                            "`fdi-sim study STUDY --calibrate OUT.toml`")
+    return d
+
+
+def _held(d: Any, source: str, where: str) -> HeldRate:
+    d = _strict(HeldRate, d, source, where)
+    try:
+        return HeldRate(int(d["runs"]), int(d["false_alarms"]), float(d["exposure_h"]), float(d["far_per_h"]),
+                        (float(d["ci_per_h"][0]), float(d["ci_per_h"][1])), bool(d["target_inside"]))
+    except (TypeError, ValueError, IndexError) as exc:
+        from fdi_sim.errors import ScenarioError
+
+        raise ScenarioError(source, where, f"a value of the wrong type ({exc})",
+                            "write the file again with `fdi-sim study STUDY --calibrate OUT.toml`") from None
+
+
+def thresholds_to_dict(t: StudyThresholds) -> dict[str, Any]:
+    """The TOML tables of a thresholds file."""
+    from dataclasses import asdict
+
+    d = asdict(t)
+    d = {"kind": THRESHOLDS_KIND, **d}
+    for h in [d["bank_calibration"], d["bank_held_out"]] + [x for m in d["members"] for x in (m["calibration"], m["held_out"])]:
+        h["ci_per_h"] = list(h["ci_per_h"])
+    d["members"] = list(d["members"])
+    return d
+
+
+def write_thresholds(t: StudyThresholds, path: str | Path) -> Path:
+    """Write a thresholds file (TOML, committed by rename)."""
+    import tomli_w
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    head = (f"# fdi-sim thresholds file: written by `fdi-sim study {t.study} --calibrate`, do not edit by hand\n"
+            f"# {t.method}\n")
+    tmp = path.with_suffix(f".tmp{os.getpid()}")
+    tmp.write_text(head + tomli_w.dumps(thresholds_to_dict(t)))
+    os.replace(tmp, path)
+    return path
+
+
+def read_thresholds(path: str | Path) -> StudyThresholds:
+    """Read a thresholds file (strict: every key, no other).
+
+    Raises
+    ------
+    ScenarioError
+        A missing or unreadable file, another kind, an unknown or missing key; naming the file and key.
+    """
+    import tomllib
+
+    from fdi_sim.errors import ScenarioError
+
+    src = str(path)
+    try:
+        d = tomllib.loads(Path(path).read_text())
+    except OSError as exc:
+        raise ScenarioError(src, "", f"cannot read the thresholds file ({exc.strerror or exc})",
+                            "give the path of a file written by `fdi-sim study STUDY --calibrate OUT.toml`, "
+                            "or thresholds = \"trained\"") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(src, "", f"not valid TOML ({exc})", "write it again with `fdi-sim study STUDY "
+                            "--calibrate OUT.toml`") from None
+    if d.pop("kind", None) != THRESHOLDS_KIND:
+        raise ScenarioError(src, "kind", f"not a thresholds file (kind must be {THRESHOLDS_KIND!r})",
+                            "give a file written by `fdi-sim study STUDY --calibrate OUT.toml`")
+    d = _strict(StudyThresholds, d, src, "")
+    members = []
+    for i, m in enumerate(d["members"] if isinstance(d["members"], list) else [None]):
+        m = _strict(StudyMemberThreshold, m, src, f"members[{i}]")
+        members.append(StudyMemberThreshold(
+            str(m["id"]), float(m["threshold"]), float(m["trained_threshold"]), float(m["scale"]),
+            float(m["target_per_h"]), _held(m["calibration"], src, f"members[{i}].calibration"),
+            _held(m["held_out"], src, f"members[{i}].held_out")))
+    try:
+        return StudyThresholds(
+            str(d["aircraft"]), str(d["study"]), str(d["study_identity"]), int(d["runs"]), float(d["flight_h"]),
+            str(d["version"]), float(d["design_h_ft"]), float(d["design_vc_kts"]), str(d["design_turbulence"]),
+            float(d["design_wind_speed_kts"]), float(d["design_noise_scale"]), str(d["design_hash"]),
+            float(d["rate_hz"]), int(d["persistence_k"]), int(d["persistence_n"]), float(d["far_per_h"]),
+            str(d["split"]), float(d["confidence"]), tuple(members),
+            _held(d["bank_calibration"], src, "bank_calibration"), _held(d["bank_held_out"], src, "bank_held_out"),
+            str(d["method"]))
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(src, "", f"a value of the wrong type ({exc})",
+                            "write the file again with `fdi-sim study STUDY --calibrate OUT.toml`") from None

@@ -20,6 +20,11 @@ def add_parser(sub: Any) -> None:
     s.add_argument("--json", action="store_true", help="print the statistics as one JSON object on stdout")
     s.add_argument("--no-report", action="store_true", help="no HTML report")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--calibrate", default=None, metavar="OUT.toml",
+                   help="after flying, calibrate each member's threshold to the bank's rate on half of the runs, check "
+                   "it on the other half and write a thresholds file ([fdi] thresholds = \"OUT.toml\"; docs/study.md)")
+    s.add_argument("--target-per-h", type=float, default=None,
+                   help="with --calibrate: the bank's target rate [1/flight hour] (default: the runs' far_per_h)")
     s.set_defaults(func=cmd_study)
 
 
@@ -69,6 +74,14 @@ def cmd_study(args: argparse.Namespace) -> int:
         print(json.dumps(summary, default=_jsonable))
     else:
         print(format_summary(summary, o))
+    if args.calibrate:
+        from fdi_sim.sim.calibrate import write_thresholds
+        from fdi_sim.study.calibration import calibrate_study, format_thresholds
+
+        t = calibrate_study(out, far_per_h=args.target_per_h)
+        write_thresholds(t, args.calibrate)
+        print(format_thresholds(t), file=sys.stderr if args.json else sys.stdout)
+        print(f"thresholds {args.calibrate}", file=sys.stderr)
     return 0
 
 

@@ -1,0 +1,158 @@
+"""A calibration study turned into a thresholds file, and banks flown with it (issue 14).
+
+A small real study (40 fault-free DHC-6 runs of 20 s at one design node, JSBSim on a local Dask
+cluster) is calibrated by the CLI; the file it writes reads back to the same object; a bank built
+with ``[fdi] thresholds = <file>`` flies exactly those thresholds (read back from the flown log's
+``fdi`` metadata); a bank the file does not match is refused naming the file, the key and the fix.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fdi_sim.errors import ScenarioError
+
+STUDY = """
+kind = "study"
+name = "t_dhc6_cal"
+scenario = "dhc6_cruise_doublets"
+seed = 21
+runs = 40
+duration_s = 20.0
+[sample]
+"atmosphere.turbulence" = { fixed = "moderate" }
+[bank]
+bank = "default"
+far_per_h = 0.5
+calibration_flights = 6
+calibration_duration_s = 60.0
+design = { point = "grid", turbulence = "moderate" }
+thresholds = "trained"
+"""
+TARGET_PER_H = 40.0  # 20 s runs: a rate the 0.2 h of each half can resolve
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory: pytest.TempPathFactory):
+    tmp = tmp_path_factory.mktemp("cal")
+    cache = tmp / "cache"
+    env = {**__import__("os").environ, "FDI_SIM_CACHE": str(cache)}
+    (tmp / "study.toml").write_text(STUDY)
+    out, thr = tmp / "out", tmp / "thresholds.toml"
+    p = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "study", str(tmp / "study.toml"), "--out", str(out),
+                        "--workers", "2", "--quiet", "--no-report", "--calibrate", str(thr),
+                        "--target-per-h", str(TARGET_PER_H)], capture_output=True, text=True, env=env, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    mp = pytest.MonkeyPatch()
+    mp.setenv("FDI_SIM_CACHE", str(cache))  # the same designs as the study's runs
+    yield out, thr, p.stdout, tmp
+    mp.undo()
+
+
+def test_the_file_reads_back_to_what_the_study_gives(study) -> None:
+    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.study.calibration import calibrate_study
+    from fdi_sim.study.execute import load_records
+
+    out, thr, stdout, _ = study
+    t = read_thresholds(thr)
+    assert t == calibrate_study(out, far_per_h=TARGET_PER_H)  # TOML round trip, bit for bit
+    meta = json.loads((out / "study.json").read_text())
+    assert (t.study, t.study_identity, t.runs, t.aircraft) == ("t_dhc6_cal", meta["identity"], 40, "DHC6")
+    assert (t.design_h_ft, t.design_vc_kts, t.design_turbulence) == (4000.0, 120.0, "moderate")
+    assert [m.id for m in t.members] == load_records(out)[0]["detectors"]
+    assert "kalman-gust-v1" in stdout and "held-out" in stdout
+
+
+def test_calibrated_thresholds_meet_the_target_on_their_half_and_are_rescored_on_the_other(study) -> None:
+    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.study.execute import load_records
+    from fdi_sim.study.rescore import rescore
+
+    out, thr, _, _ = study
+    t = read_thresholds(thr)
+    recs = load_records(out)
+    odd = [r for r in recs if r["index"] % 2 == 1]
+    even = [r for r in recs if r["index"] % 2 == 0]
+    for m in t.members:
+        assert m.target_per_h == pytest.approx(TARGET_PER_H / 5)
+        assert m.calibration.false_alarms <= m.target_per_h * m.calibration.exposure_h
+        assert m.calibration.runs == len(even) and m.held_out.runs == len(odd)
+        rs = rescore(odd, out, [m.scale]).detectors[m.id]  # the held-out count by the direct rule
+        assert int(rs.false_alarms[0]) == m.held_out.false_alarms
+        lo, hi = m.held_out.ci_per_h
+        assert lo <= m.held_out.far_per_h <= hi and m.held_out.target_inside == (lo <= m.target_per_h <= hi)
+        assert m.threshold == pytest.approx(m.trained_threshold * m.scale, rel=1e-12)
+    assert t.bank_held_out.runs == len(odd)
+    assert t.bank_held_out.exposure_h == pytest.approx(t.members[0].held_out.exposure_h)
+
+
+def _run_scenario(out: Path, tmp: Path, thresholds: str, **initial: float) -> Path:
+    text = (out / "runs" / "000000.toml").read_text()
+    d = tomllib.loads(text)
+    d["fdi"]["thresholds"] = thresholds
+    d["duration_s"] = 8.0
+    d["initial"].update(initial)
+    d["log"] = {"per_step": False}
+    import tomli_w
+
+    p = tmp / f"flight_{len(list(tmp.glob('flight_*.toml')))}.toml"
+    p.write_text(tomli_w.dumps(d))
+    return p
+
+
+def test_a_bank_with_the_file_flies_exactly_its_thresholds(study) -> None:
+    from fdi_sim.flightlog import read_log
+    from fdi_sim.scenario import load
+    from fdi_sim.sim import run
+    from fdi_sim.sim.calibrate import read_thresholds
+
+    out, thr, _, tmp = study
+    t = read_thresholds(thr)
+    res = run(load(_run_scenario(out, tmp, str(thr))), tmp / "logs", progress=False)
+    assert res.status == "completed"
+    log = read_log(res.log_path)
+    members = json.loads(log.metadata["fdi"]["members"])
+    assert [m["threshold"] for m in members] == [m.threshold for m in t.members]
+    assert [m["threshold"] for m in members] != [m.trained_threshold for m in t.members]
+    cal = json.loads(log.metadata["fdi"]["calibration"])
+    assert cal["source"] == "study" and cal["study_identity"] == t.study_identity
+    for m in cal["members"]:
+        assert m["method"].startswith(f"calibration study t_dhc6_cal (40 runs, {t.flight_h:.1f} h), held-out rate ")
+    # and the statistic topics compare with them, sample by sample
+    for m in t.members:
+        thr_col = np.asarray(log.topics[f"/fdi/{m.id}/statistic"]["threshold"])
+        assert np.all(thr_col == m.threshold)
+
+
+def test_a_bank_the_file_does_not_match_is_refused(study) -> None:
+    from fdi_sim.scenario import load
+    from fdi_sim.sim import run
+
+    out, thr, _, tmp = study
+    sc = load(_run_scenario(out, tmp, str(thr), h_ft=9000.0))  # designed at the 10000 ft node
+    with pytest.raises(ScenarioError, match=r"fdi\.thresholds.*does not match this bank: its design node") as e:
+        run(sc, tmp / "logs", progress=False)
+    assert str(thr) in str(e.value) and 'thresholds = "trained"' in str(e.value)
+    # the CLI: exit 2, one paragraph, no traceback
+    p = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "run", str(_run_scenario(out, tmp, str(thr), h_ft=9000.0)),
+                        "--out", str(tmp / "logs")], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 2 and "Traceback" not in p.stderr and "fdi.thresholds" in p.stderr, p.stderr[-2000:]
+
+
+def test_a_damaged_file_is_refused_naming_the_key(study, tmp_path: Path) -> None:
+    from fdi_sim.sim.calibrate import read_thresholds
+
+    _, thr, _, _ = study
+    bad = tmp_path / "bad.toml"
+    bad.write_text(thr.read_text().replace("design_hash =", "design_hsah ="))
+    with pytest.raises(ScenarioError, match=r"bad\.toml: design_hsah: unknown key"):
+        read_thresholds(bad)
+    with pytest.raises(ScenarioError, match="cannot read the thresholds file"):
+        read_thresholds(tmp_path / "missing.toml")
