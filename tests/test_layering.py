@@ -1,11 +1,13 @@
-"""One adapter per engine (STYLE rule 2): jsbsim, MCAP and matplotlib each imported in one place."""
+"""One adapter per engine (STYLE rule 2): jsbsim, MCAP and the plotting libraries (matplotlib, plotly)
+each imported in one place."""
 from __future__ import annotations
 
 import ast
 from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "fdi_sim"
-ALLOWED = {"jsbsim": "aircraft", "mcap": "flightlog", "foxglove": "flightlog", "matplotlib": "review"}
+ALLOWED = {"jsbsim": "aircraft", "mcap": "flightlog", "foxglove": "flightlog", "matplotlib": "review",
+           "plotly": "review"}
 
 
 def _imports(path: Path) -> set[str]:

@@ -60,7 +60,8 @@ class Decimator:
     windows_s : tuple of (float, float)
         Closed intervals [s] kept at full resolution, sorted and disjoint (see :func:`zoom_windows`).
     max_points : int
-        Cap on the points a trace keeps outside the windows (the windows add their samples).
+        Cap on the points a trace keeps outside the windows (the windows add their samples); it
+        holds whenever it is at least ``5 * (len(windows_s) + 1)`` (each window may split a bucket).
     """
 
     t0_s: float

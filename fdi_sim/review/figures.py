@@ -5,10 +5,10 @@ into sections of figures, in this order: timeline, one section per detector, fli
 :func:`figure_html` renders one figure as a ``<div>`` and its ``Plotly.newPlot`` call;
 :func:`plotly_script_tag` inlines plotly.js once per page (the page loads nothing from the network).
 
-The specs are plain dicts with plotly attribute names (no ``plotly.graph_objects`` validation,
-measured slower by a factor of about 30); time series are decimated by
-:class:`fdi_sim.review.decimate.Decimator` (every spike kept, full resolution around fault and
-alarm onsets) and stored as lists: values at 6 significant digits, times at 1 ms, NaN as null,
+The specs are plain dicts with plotly attribute names: validating those of a 10-minute run with
+``plotly.graph_objects.Figure`` took 0.67 s on top of the 0.21 s that building them takes. Time
+series are decimated by :class:`fdi_sim.review.decimate.Decimator` (every spike kept, full
+resolution around fault and alarm onsets) and stored as lists: values at 6 significant digits, times at 1 ms, NaN as null,
 so a spec is JSON as it stands. Only ``scatter`` traces (WebGL fails in headless Chromium).
 Angles are logged in rad and shown in degrees; every axis names its unit.
 """
@@ -433,7 +433,7 @@ def _statistic_figure(ctx: _Context, det: str) -> Figure:
         lines += _detection(r, det, st)
     pos = np.concatenate(positive) if positive else np.zeros(0)
     log_y = pos.size > 0 and float(pos.max()) / float(pos.min()) > 100.0
-    lay = _layout(ctx, ["statistic [-]", "valid, alarm"], title=f"{det}: test statistic against threshold",
+    lay = _layout(ctx, ["statistic [-]", "valid, alarm [0/1]"], title=f"{det}: test statistic against threshold",
                   ylog=(1,) if log_y else (), heights=[2.2, 0.6])
     lay["yaxis2"].update({"range": [-0.1, 1.1], "tickvals": [0, 1]})
     caption = (f"Statistic against its threshold{' (log scale)' if log_y else ''} over the shaded true fault "

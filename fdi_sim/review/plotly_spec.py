@@ -165,4 +165,5 @@ def bars(rows: list[tuple[str, list[tuple[float, float]]]], name: str, colour: s
     if not x:
         return None
     return {"type": "scatter", "mode": "lines", "name": name, "x": x, "y": y, "legendgroup": group,
+            "xaxis": "x", "yaxis": "y",
             "line": {"color": colour, "width": width}, "opacity": 0.55, "hoverinfo": "x+y", "connectgaps": False}
