@@ -410,6 +410,11 @@ def write_thresholds(t: StudyThresholds, path: str | Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     head = (f"# fdi-sim thresholds file: written by `fdi-sim study {t.study} --calibrate`, do not edit by hand\n"
             f"# {t.method}\n")
+    b = t.bank_held_out
+    head += (f"# held-out half: the bank {b.false_alarms} false alarms in {b.exposure_h:.1f} h = {b.far_per_h:.3g} per h "
+             f"[{b.ci_per_h[0]:.3g}, {b.ci_per_h[1]:.3g}], target {t.far_per_h:g} "
+             f"{'inside' if b.target_inside else 'OUTSIDE'}; members outside: "
+             f"{', '.join(m.id for m in t.members if not m.held_out.target_inside) or 'none'}\n")
     tmp = path.with_suffix(f".tmp{os.getpid()}")
     tmp.write_text(head + tomli_w.dumps(thresholds_to_dict(t)))
     os.replace(tmp, path)
