@@ -15,8 +15,8 @@ Everything is vectorised numpy (one pass per trace, no Python loop per sample).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,6 +49,24 @@ class Decimated:
         return int(self.index.size)
 
 
+@dataclass(frozen=True, eq=False)
+class _Segments:
+    starts: NDArray[np.intp]
+    ends: NDArray[np.intp]
+    seg: NDArray[np.intp]
+
+
+@dataclass(frozen=True, eq=False)
+class _Grid:
+    """A time base cut into buckets: the window mask, the outside samples, their segments
+    (4 points a bucket; 5 for a trace with NaN, which keeps one NaN a bucket)."""
+
+    inside: NDArray[np.bool_]
+    out: NDArray[np.intp]
+    plain: _Segments
+    with_nan: _Segments
+
+
 @dataclass(frozen=True)
 class Decimator:
     """Decimation shared by the traces of one figure.
@@ -68,6 +86,8 @@ class Decimator:
     t1_s: float
     windows_s: tuple[tuple[float, float], ...] = ()
     max_points: int = MAX_POINTS
+    _grids: dict[Any, tuple[NDArray[np.float64], _Grid]] = field(default_factory=dict, init=False, repr=False,
+                                                                 compare=False)
 
     def __post_init__(self) -> None:
         if not self.max_points >= 8:
@@ -95,32 +115,46 @@ class Decimator:
         n = t_s.shape[0]
         if y.shape != (n,):
             raise ValueError(f"decimate: t_s has {n} samples but y has shape {y.shape}; give one value per time")
+        grid = self._grid(t_s)
+        if grid.out.size <= self.max_points:
+            return np.arange(n, dtype=np.intp)
+        v = y[grid.out]
+        nan = np.isnan(v)
+        g = grid.with_nan if nan.any() else grid.plain
+        lo = np.where(nan, np.inf, v)
+        hi = np.where(nan, -np.inf, v)
+        picks = [g.starts, g.ends,
+                 _first_per_segment(g.seg, lo == np.minimum.reduceat(lo, g.starts)[g.seg]),
+                 _first_per_segment(g.seg, hi == np.maximum.reduceat(hi, g.starts)[g.seg])]
+        if nan.any():
+            picks.append(_first_per_segment(g.seg, nan))
+        mask = grid.inside.copy()
+        mask[grid.out[np.concatenate(picks)]] = True
+        return np.flatnonzero(mask)
+
+    def _grid(self, t_s: NDArray[np.float64]) -> _Grid:
+        """The buckets of a time base, computed once per time array (traces of one topic share it)."""
+        key = (t_s.__array_interface__["data"][0], t_s.shape, t_s.strides)
+        hit = self._grids.get(key)
+        if hit is not None and hit[0].shape == t_s.shape and np.shares_memory(hit[0], t_s):
+            return hit[1]  # the cached array is held, so its memory (read-only log data) is the same
         inside = self._inside(t_s)
         out = np.flatnonzero(~inside)
-        if out.size <= self.max_points:
-            return np.arange(n, dtype=np.intp)
-        v = y[out]
-        nan = np.isnan(v)
-        per_bucket = 5 if nan.any() else 4
+        grid = _Grid(inside, out, self._segments(t_s, out, 4), self._segments(t_s, out, 5))
+        self._grids[key] = (t_s, grid)
+        return grid
+
+    def _segments(self, t_s: NDArray[np.float64], out: NDArray[np.intp], per_bucket: int) -> _Segments:
+        """Runs of consecutive outside samples in one bucket, ``per_bucket`` points each at most."""
         # a window can split a bucket in two: reserve its extra points so the cap holds
         n_buckets = max(1, (self.max_points - per_bucket * len(self.windows_s)) // per_bucket)
         span_s = self.t1_s - self.t0_s
         scale = n_buckets / span_s if span_s > 0 else 0.0
         bucket = np.clip(((t_s[out] - self.t0_s) * scale).astype(np.int64), 0, n_buckets - 1)
-        # segments: runs of consecutive outside samples in one bucket
         cut = np.flatnonzero((np.diff(bucket) != 0) | (np.diff(out) != 1)) + 1
         starts = np.concatenate(([0], cut))
         ends = np.concatenate((cut, [out.size])) - 1
-        seg = np.repeat(np.arange(starts.size), ends - starts + 1)
-        lo = np.where(nan, np.inf, v)
-        hi = np.where(nan, -np.inf, v)
-        picks = [starts, ends,
-                 _first_per_segment(seg, lo == np.minimum.reduceat(lo, starts)[seg]),
-                 _first_per_segment(seg, hi == np.maximum.reduceat(hi, starts)[seg])]
-        if per_bucket == 5:
-            picks.append(_first_per_segment(seg, nan))
-        kept = out[np.concatenate(picks)]
-        return np.unique(np.concatenate((kept, np.flatnonzero(inside)))).astype(np.intp)
+        return _Segments(starts, ends, np.repeat(np.arange(starts.size), ends - starts + 1))
 
     def _inside(self, t_s: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Mask of the samples inside any window (the windows' edges counted in)."""
