@@ -20,7 +20,7 @@ from typing import Sequence
 
 from fdi_sim.errors import ReviewError
 from fdi_sim.flightlog.reader import FlightLog
-from fdi_sim.review.run_review import DetectorReview, RunReview
+from fdi_sim.review.run_review import DetectorReview, RunReview, windows_text
 
 CSS = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:1.5em auto;max-width:1200px;
@@ -128,8 +128,8 @@ def _run_details(r: RunReview, tag: str) -> str:
     if r.read_path != r.path:
         out.append(f"<p class=\"warn\">{_e(r.notes[0])}</p>")
     out.append(f"<h3>{_e(tag)}Faults injected</h3>")
-    out.append(_table(("label", "type", "target", "true intervals [s]"),
-                      [(f.label, f.type, f.target, ", ".join(f"{a:.2f} .. {b:.2f}" for a, b in f.windows_s))
+    out.append(_table(("label", "type", "target", "true intervals"),
+                      [(f.label, f.type, f.target, windows_text(f.windows_s, r.t_end_s))
                        for f in r.faults]))
     out.append(f"<h3>{_e(tag)}Failure log</h3>")
     out.append(_table(("t [s]", "event", "detector", "hypothesis", "kind", "nature", "duration [s]"),

@@ -226,7 +226,7 @@ class RunReview:
             for f in self.faults:
                 d = self.first_detection(f.label)
                 if d is None:
-                    rows.append((f"fault {f.label}", f"NOT detected (true interval {_w(f.windows_s)})"))
+                    rows.append((f"fault {f.label}", f"NOT detected (true interval {windows_text(f.windows_s, self.t_end_s)})"))
                     continue
                 iso = d.isolation or "not isolated"
                 mark = "" if d.isolation_correct is None else (" (right)" if d.isolation_correct else " (wrong)")
@@ -255,7 +255,7 @@ class RunReview:
         planned = "" if self.planned_s is None else f" of {self.planned_s:g} s planned"
         out.append(f"{'flown':{w}}{self.duration_s:.2f} s{planned}{rate}")
         for f in self.faults:
-            out.append(f"{'fault':{w}}{f.label}: {f.type} on {f.target}, {_w(f.windows_s)}")
+            out.append(f"{'fault':{w}}{f.label}: {f.type} on {f.target}, {windows_text(f.windows_s, self.t_end_s)}")
         for r in self.detectors:
             far = "" if r.far_per_h is None else f", {r.far_per_h:.3g} /h (95 % {r.far_ci_per_h[0]:.3g} .. " \
                                                   f"{r.far_ci_per_h[1]:.3g})"
@@ -288,8 +288,10 @@ class RunReview:
         return _clean(asdict(self))
 
 
-def _w(windows: Sequence[tuple[float, float]]) -> str:
-    return ", ".join(f"{a:.2f} .. {b:.2f} s" for a, b in windows) or "no window"
+def windows_text(windows: Sequence[tuple[float, float]], t_end_s: float = math.inf) -> str:
+    """``"10.00 .. 25.00 s, 40.00 s .. the end"``: windows [s], one still open at ``t_end_s`` [s]."""
+    return ", ".join(f"{a:.2f} s .. the end" if b >= t_end_s else f"{a:.2f} .. {b:.2f} s" for a, b in windows) \
+        or "no window"
 
 
 def _clean(x: Any) -> Any:
