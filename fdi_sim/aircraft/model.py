@@ -360,6 +360,11 @@ class Aircraft:
         """One JSBSim step of ``dt_s``; False if JSBSim asked to stop."""
         return bool(self.fdm.run())
 
+    def stepper(self) -> Callable[[], object]:
+        """:meth:`step` without its Python frame, for the loop: a callable whose result is falsy
+        when JSBSim asked to stop (``FGFDMExec.run`` bound; ~0.1 us a step less)."""
+        return self.fdm.run
+
     @property
     def t_s(self) -> float:
         return float(self.fdm.get_sim_time())

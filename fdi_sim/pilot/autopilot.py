@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import tomllib
 from dataclasses import dataclass, fields
-from typing import NamedTuple, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -328,6 +328,12 @@ class Pilot:
             psi_ref [rad], phi_ref [rad]): fields 1..8 of :meth:`step`'s result, the same floats.
         """
         K.step(t_s, y, out, self._state, self._par)
+
+    def compiled(self) -> tuple[Callable[..., None], NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`step_into` without its Python frame, for the loop: ``(step, state, params)`` with
+        ``step(t_s, y, out, state, params)`` the same call (the arrays are the pilot's own; :meth:`reset`
+        changes them in place)."""
+        return K.step, self._state, self._par
 
     def step(self, t_s: float, y: NDArray[np.float64] | list[float]) -> PilotCommand:
         """Commands for time ``t_s`` [s] from the measurement vector ``y`` (array or list of floats).

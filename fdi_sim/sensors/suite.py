@@ -15,7 +15,7 @@ from __future__ import annotations
 import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -184,6 +184,15 @@ class SensorSuite:
         if K.measure(t_s, x, out, self._tab, self._off):  # True: step outside the noise block, nothing written
             self._fill_block(int(self._tab[0, K.K_WANTED]))
             K.measure(t_s, x, out, self._tab, self._off)
+
+    def compiled(self) -> tuple[Callable[..., bool], NDArray[np.float64], NDArray[np.float64], Callable[[], None]]:
+        """:meth:`measure_into` without its Python frame, for the loop: ``(measure, tab, off, refill)``
+        with ``if measure(t_s, x, out, tab, off): refill(); measure(t_s, x, out, tab, off)`` the
+        same call (the arrays are the suite's own, updated in place by :meth:`reset` and ``refill``)."""
+        return K.measure, self._tab, self._off, self._refill
+
+    def _refill(self) -> None:
+        self._fill_block(int(self._tab[0, K.K_WANTED]))
 
     def step(self, t_s: float, truth: NDArray[np.float64]) -> Measurement:
         """Measure the truth vector at time ``t_s`` [s]."""

@@ -702,8 +702,11 @@ class FdiBank:
 
     def _log(self, t: NDArray[np.float64], S: int) -> None:
         for m in self.members:
-            _stat_rows(m.stat[:S], m.thr[:S], m.exceed[:S], m.alarm[:S], m.valid[:S], m.iso[:S], m.point[:S],
-                       m.rows[:S])
+            if S == m.full_S:  # the loop's case: the arrays themselves (eight slices cost ~1.5 us)
+                _stat_rows(m.stat, m.thr, m.exceed, m.alarm, m.valid, m.iso, m.point, m.rows)
+            else:
+                _stat_rows(m.stat[:S], m.thr[:S], m.exceed[:S], m.alarm[:S], m.valid[:S], m.iso[:S], m.point[:S],
+                           m.rows[:S])
         # every channel's rows before the writer's flush boundary first, then the rest: each chunk
         # then holds the same sample times on every /fdi channel (writer.window_end_s)
         end = self._writer.window_end_s

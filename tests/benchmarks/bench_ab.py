@@ -1,0 +1,71 @@
+"""Benchmark (on demand): the study-mode loop of two source trees, interleaved, as ratios to bare JSBSim.
+
+On a shared machine the absolute step times move with the load by a factor of two or more; the
+ratio loop/bare measured in one process moves much less, and alternating the two trees trial by
+trial lets the load hit both alike. ``base`` is a copy of another commit's tree::
+
+    mkdir /tmp/base && git archive HEAD fdi_sim aircraft scenarios | tar -x -C /tmp/base
+    python tests/benchmarks/bench_ab.py /tmp/base [trials] [duration_s]
+
+Each trial is a fresh process on one tree: a 60 s warm-up flight (design cached, kernels loaded),
+then bare JSBSim and the study-mode flight (``check_study_logs.study_text``) twice, interleaved;
+it reports the best of each as us/step. Printed: per tree and aircraft the median over the trials
+of the ratio and of the loop's overhead over bare (us/step). Never a timed assertion in the suite.
+"""
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+NEW = HERE.parents[1]
+
+TRIAL = r"""
+import sys, tempfile
+sys.path.insert(0, {here!r})
+from bench_loop import bare_rate
+from bench_split import _study_scenario
+from fdi_sim.sim import run
+name, T = {name!r}, {T!r}
+sc = _study_scenario(name, T)
+bare, loop = [], []
+with tempfile.TemporaryDirectory() as d:
+    run(_study_scenario(name, 60.0), d, progress=False)
+    for _ in range(2):
+        bare.append(1e6 / bare_rate(sc.aircraft, sc, min(T, 120.0)))
+        r = run(sc, d, progress=False).summary
+        loop.append(1e6 * r.wall_s / r.steps)
+print(min(bare), min(loop))
+"""
+
+
+def trial(tree: Path, name: str, T: float) -> tuple[float, float]:
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    code = TRIAL.format(here=str(HERE), name=name, T=T)
+    out = subprocess.run([sys.executable, "-c", code], cwd=tree, env=env, capture_output=True, text=True, check=True)
+    import fdi_sim  # noqa: F401 (only to fail early outside the venv)
+    b, lp = (float(v) for v in out.stdout.split()[-2:])
+    return b, lp
+
+
+def main(base: str, trials: int = 4, T: float = 300.0) -> None:
+    trees = {"base": Path(base).resolve(), "new": NEW}
+    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} (2 cores)")
+    for name in ("f16_cruise_doublets", "dhc6_cruise_doublets"):
+        res: dict[str, list[tuple[float, float]]] = {k: [] for k in trees}
+        for _ in range(trials):
+            for label, tree in trees.items():
+                res[label].append(trial(tree, name, T))
+        for label, rows in res.items():
+            ratio = statistics.median(b / lp for b, lp in rows)
+            over = statistics.median(lp - b for b, lp in rows)
+            print(f"{name:22} {label:5} ratio to bare {ratio:.3f} (trials {', '.join(f'{b / lp:.3f}' for b, lp in rows)})"
+                  f"  overhead {over:.2f} us/step  bare {statistics.median(b for b, _ in rows):.2f} us/step")
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], *(int(sys.argv[2]),) if len(sys.argv) > 2 else (), *(float(sys.argv[3]),) if len(sys.argv) > 3 else ())
