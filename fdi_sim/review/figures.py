@@ -359,6 +359,9 @@ def _timeline(ctx: _Context) -> Figure:
     for r, op in icing:
         t, y = _series(dec, op, "icing_eta")
         data.append(line(t, y, r.name("icing eta"), r.colour(5), panel=2, group=f"run-{r.index}"))
+    if not data:
+        caption = "No fault was injected and no detector ran in this run: nothing to mark on the timeline."
+        return Figure("fig-timeline", "Faults, alarms and isolations", caption, {"data": data, "layout": lay})
     caption = ("Shaded bands and thick bars are the true fault intervals from the log's catalog; thin bars mark "
                "each detector's alarm, triangles its onsets, diamonds each isolation (hover for the hypothesis)"
                + ("; crosses the reconfigurations" if any(r.events(TOPIC_RECONFIGURATION) for r in ctx.runs) else "")
@@ -373,8 +376,15 @@ def _hyp_name(hyp: Sequence[str], k: int) -> str:
 
 
 # --- per detector ---------------------------------------------------------------------------------
-def _detection(r: _Run, det: str, st: VectorTopic) -> list[str]:
-    """One line per injected fault: first alarm at or after onset, delay, isolation (right/wrong)."""
+@dataclass(frozen=True)
+class _Detection:
+    text: str
+    t_s: float | None  # first alarm at or after the onset [s]
+    delay_s: float | None
+
+
+def _detection(r: _Run, det: str, st: VectorTopic) -> list[_Detection]:
+    """One per injected fault: first alarm at or after onset, delay, isolation (right/wrong)."""
     a = st["alarm"] > 0.5
     iso = st["isolation"] if "isolation" in st.fields else np.full(len(st), -1.0)
     hyp = r.hypotheses(det)
@@ -386,7 +396,7 @@ def _detection(r: _Run, det: str, st: VectorTopic) -> list[str]:
         idx = np.flatnonzero(a & (st.t_s >= t_on))
         lab = f.get("label", "?")
         if not idx.size:
-            out.append(f"{r.name(lab)}: not detected")
+            out.append(_Detection(f"{r.name(lab)}: not detected", None, None))
             continue
         t1 = float(st.t_s[idx[0]])
         near = iso[idx[st.t_s[idx] < t1 + ISOLATION_WINDOW_S]]
@@ -397,14 +407,15 @@ def _detection(r: _Run, det: str, st: VectorTopic) -> list[str]:
         mark = ""
         if k >= 0 and target not in ("", "airframe"):
             mark = " (right)" if name == target or name.startswith(target + "_") else " (wrong)"
-        out.append(f"{r.name(lab)}: detected at {t1:.2f} s, delay {t1 - t_on:.2f} s, isolated as {name}{mark}")
+        out.append(_Detection(f"{r.name(lab)}: detected at {t1:.2f} s, delay {t1 - t_on:.2f} s, isolated as "
+                              f"{name}{mark}", t1, t1 - t_on))
     return out
 
 
 def _statistic_figure(ctx: _Context, det: str) -> Figure:
     dec = ctx.decimator(det)
     data: list[dict[str, Any]] = []
-    lines: list[str] = []
+    found: list[tuple[_Run, _Detection, float]] = []
     positive: list[NDArray[np.float64]] = []
     for r in ctx.runs:
         st = r.statistic(det)
@@ -430,12 +441,21 @@ def _statistic_figure(ctx: _Context, det: str) -> Figure:
                           r.colour(0), panel=2, shape="hv", width=2, group=g))
         fin = np.concatenate((s[np.isfinite(s)], st["threshold"]))
         positive.append(fin[fin > 0])
-        lines += _detection(r, det, st)
+        for hit in _detection(r, det, st):
+            k = int(np.searchsorted(st.t_s, hit.t_s)) if hit.t_s is not None else 0
+            found.append((r, hit, float(st["statistic"][min(k, len(st) - 1)])))
     pos = np.concatenate(positive) if positive else np.zeros(0)
     log_y = pos.size > 0 and float(pos.max()) / float(pos.min()) > 100.0
     lay = _layout(ctx, ["statistic [-]", "valid, alarm [0/1]"], title=f"{det}: test statistic against threshold",
                   ylog=(1,) if log_y else (), heights=[2.2, 0.6])
     lay["yaxis2"].update({"range": [-0.1, 1.1], "tickvals": [0, 1]})
+    for r, hit, y in found:  # the detection delay, pointed at (log axes place annotations in log10)
+        if hit.t_s is not None and np.isfinite(y) and (y > 0 or not log_y):
+            lay["annotations"].append({"x": round(hit.t_s, 3), "y": float(np.log10(y)) if log_y else y,
+                                       "xref": "x", "yref": "y", "text": r.name(f"delay {hit.delay_s:.2f} s"),
+                                       "showarrow": True, "arrowhead": 2, "ax": 30, "ay": -30,
+                                       "font": {"size": 10, "color": r.colour(0)}, "arrowcolor": r.colour(0)})
+    lines = [hit.text for _, hit, _ in found]
     caption = (f"Statistic against its threshold{' (log scale)' if log_y else ''} over the shaded true fault "
                "intervals; gaps where the detector was not valid. " + ("; ".join(lines) + "." if lines else
                                                                       "No fault injected."))

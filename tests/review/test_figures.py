@@ -262,6 +262,8 @@ def test_statistic_threshold_and_alarms_are_the_logged_ones(logs: dict[str, Flig
             assert "not detected" in fig.caption
         else:
             assert f"detected at {t1:.2f} s, delay {t1 - 10.0:.2f} s, isolated as {name or 'rejected'}" in fig.caption
+            notes = [a for a in fig.spec["layout"]["annotations"] if a["text"].startswith("delay")]
+            assert [(a["x"], a["text"]) for a in notes] == [(round(t1, 3), f"delay {t1 - 10.0:.2f} s")]
         onsets = [tr for tr in fig.spec["data"] if tr["name"] == "alarm onset"]
         a = st["alarm"] > 0.5
         rising = st.t_s[np.flatnonzero(a & ~np.concatenate(([False], a[:-1])))]
@@ -320,6 +322,7 @@ def test_a_log_without_a_bank_has_no_detector_sections(logs: dict[str, FlightLog
     assert all(s.detector is None for s in sections)
     text = json.dumps([f.spec for f in _figures(sections)])
     assert "alarm" not in text and "statistic" not in text
+    assert sections[0].figures[0].caption.startswith("No fault was injected and no detector ran")
 
 
 def test_icing_eta_shows_on_the_timeline(logs: dict[str, FlightLog]) -> None:
