@@ -1,11 +1,16 @@
-"""A finished calibration study turned into a thresholds file the default bank can use.
+"""Thresholds calibrated on a study's runs, and a finished calibration study turned into the
+thresholds file a default bank can use.
+
+:func:`calibrate_threshold` and :func:`check_calibration` (moved here from
+:mod:`fdi_sim.study.rescore`, which still exports them) calibrate one member, or the bank, to a
+target rate by exact inversion of the re-scored false-alarm count (:data:`CALIBRATION_METHOD`).
 
 The study flies the bank with its trained thresholds (``[bank] thresholds = "trained"``) at one
 design node; every run logs each member's statistic (:mod:`fdi_sim.study.rescore`). Here each
 member's threshold is calibrated, by exact inversion of the false-alarm count
-(:func:`fdi_sim.study.rescore.calibrate_threshold`), to its share of the bank's rate,
+(:func:`calibrate_threshold`), to its share of the bank's rate,
 ``far_per_h / members`` (the split the trained thresholds use, a union bound), on the runs of
-even index, and checked on the odd ones (:func:`fdi_sim.study.rescore.check_calibration`: exact
+even index, and checked on the odd ones (:func:`check_calibration`: exact
 Poisson interval); the bank, the OR of its members at their calibrated thresholds under the
 runs' own k-of-n rule, is checked against ``far_per_h`` on both halves. The result
 (:class:`fdi_sim.sim.calibrate.StudyThresholds`) carries the study's name, identity hash, run
@@ -16,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -26,13 +32,200 @@ from fdi_sim.decision.intervals import poisson_rate_interval
 from fdi_sim.errors import StudyError
 from fdi_sim.sim.bank import LATE_GRACE_S
 from fdi_sim.sim.calibrate import HeldRate, StudyMemberThreshold, StudyThresholds
+from fdi_sim.study.rescore import (SCALE_NUDGE, _outside, _runs, exceedances, persistence, persistence_level,
+                                   rescore)
+from fdi_sim.study.stats import BANK, exposure_s
 from fdi_sim.units import S_PER_H
 
+__all__ = ["Calibration", "CALIBRATION_METHOD", "calibrate_threshold", "CalibrationCheck", "check_calibration",
+           "STUDY_METHOD", "bank_rate", "calibrate_study", "format_thresholds"]
+
+
+# --- a threshold scale calibrated on a set of runs (was in fdi_sim.study.rescore) --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Calibration:
+    """A threshold scale calibrated to a target false-alarm rate on a set of runs.
+
+    Attributes
+    ----------
+    detector : str
+        A member id or ``bank`` (every member at the same scale).
+    target_per_h : float
+        [1/h].
+    scale : float
+        The smallest threshold multiplier from which on the rate stays at or below the target on
+        these runs [-].
+    false_alarms : int
+        At ``scale``.
+    exposure_h : float
+        Armed fault-free hours [h].
+    far_per_h : float
+        ``false_alarms / exposure_h`` [1/h].
+    runs : int
+    threshold_median : float
+        Median over the runs of the logged threshold x scale [-] (the member's threshold; NaN for
+        the bank).
+    method : str
+    """
+
+    detector: str
+    target_per_h: float
+    scale: float
+    false_alarms: int
+    exposure_h: float
+    far_per_h: float
+    runs: int
+    threshold_median: float
+    method: str
+
+
+CALIBRATION_METHOD = (
+    "exact inversion of the false-alarm count: with z_j the k-th largest statistic/threshold in the persistence "
+    "window ending at sample j, the alarm at scale s is z_j > s, so an onset at a fault-free sample j exists for s "
+    "in [z_(j-1), z_j); the count is summed over these intervals as a step function of s and the scale is the "
+    "lowest breakpoint from which on the count stays <= target x exposure (no bisection needed)")
+
+
+def calibrate_threshold(records: Sequence[Mapping[str, Any]], out_dir: str | Path, detector: str,
+                        target_per_h: float, *, k: int | None = None, n: int | None = None,
+                        grace_s: float = LATE_GRACE_S) -> Calibration:
+    """The threshold scale at which ``detector``'s false-alarm rate on these runs meets the target.
+
+    The count ``N(s)`` of false alarms at scale ``s`` is a step function; the scale returned is
+    the lowest ``s`` with ``N(s') <= target_per_h x exposure_h`` for every ``s' >= s`` (the
+    rate is at most the target from there on), found exactly from its breakpoints
+    (:data:`CALIBRATION_METHOD`, :func:`persistence_level`), then raised by :data:`SCALE_NUDGE`
+    relative so that :func:`rescore` at it counts the same. With fewer than one false alarm
+    allowed (``target x exposure < 1``) it is the scale just above the largest fault-free
+    persistence level: the calibration then rests on one extreme, and held-out runs
+    (:func:`check_calibration`) say how well.
+
+    Parameters
+    ----------
+    records : sequence of mapping
+        The runs to calibrate on (completed runs with a log count).
+    out_dir : path
+    detector : str
+        A member id, or ``bank``.
+    target_per_h : float
+        False alarms per armed fault-free flight hour [1/h].
+    k, n : int, optional
+        Persistence (default: each run's own).
+    """
+    runs, _ = _runs(records, out_dir, k, n)
+    lo, hi, expo, thr = [], [], 0.0, []
+    used = 0
+    for run in runs:
+        ids = [d for d in run.record.get("detectors", []) if d in run.stats]
+        if detector != BANK and detector not in ids:
+            continue
+        members = ids if detector == BANK else [detector]
+        if not members:
+            continue
+        used += 1
+        st0 = run.stats[members[0]]
+        z = np.max([persistence_level(run.stats[m].statistic, run.stats[m].threshold, run.stats[m].valid, run.k, run.n)
+                    for m in members], axis=0)  # the bank alarms when some member does
+        if detector != BANK:
+            thr.append(float(np.median(st0.threshold)))
+        zprev = np.concatenate(([-np.inf], z[:-1]))
+        elig = _outside(st0.t_s, run.record, grace_s) & (z > zprev)
+        lo.append(zprev[elig])
+        hi.append(z[elig])
+        expo += exposure_s(run.record, grace_s)
+    if not used:
+        raise StudyError(str(out_dir), detector, f"no completed run with a log has {detector!r}",
+                         "name a member of the study's bank, or 'bank'")
+    a = np.sort(np.concatenate(lo)) if lo else np.zeros(0)
+    b = np.sort(np.concatenate(hi)) if hi else np.zeros(0)
+    expo_h = expo / S_PER_H
+    allowed = target_per_h * expo_h
+    pts = np.unique(np.concatenate((a[np.isfinite(a)], b[np.isfinite(b)])))
+    if pts.size == 0:
+        s_star, count = 0.0, 0
+    else:
+        # N(p) = #{a <= p} - #{b <= p}: onsets with a <= p < b (a < b always)
+        N = np.searchsorted(a, pts, side="right") - np.searchsorted(b, pts, side="right")
+        over = np.flatnonzero(N > allowed)
+        if over.size == 0:
+            s_star, count = float(pts[0]), int(N[0])
+        else:
+            i = over[-1] + 1  # N(p_top) = 0 <= allowed, so i is a breakpoint
+            s_star, count = float(pts[i]), int(N[i])
+        s_star *= 1.0 + SCALE_NUDGE
+    return Calibration(detector, float(target_per_h), s_star, count, expo_h,
+                       count / expo_h if expo_h > 0 else math.nan, used,
+                       float(np.median(thr)) * s_star if thr else math.nan, CALIBRATION_METHOD)
+
+
+@dataclass(frozen=True)
+class CalibrationCheck:
+    """A calibration on one half of the runs, its rate on the other half.
+
+    Attributes
+    ----------
+    calibration : Calibration
+        On the calibration half.
+    split : str
+        ``even`` (calibrated on even run indices, checked on odd ones) or ``odd``.
+    held_out_runs : int
+    false_alarms : int
+        On the held-out half at the calibrated scale.
+    exposure_h : float
+        Held-out armed fault-free hours [h].
+    far_per_h : float
+        [1/h].
+    far_per_h_ci : tuple of float
+        Exact Poisson interval [1/h].
+    target_inside : bool
+        The target lies in the held-out interval.
+    confidence : float
+    """
+
+    calibration: Calibration
+    split: str
+    held_out_runs: int
+    false_alarms: int
+    exposure_h: float
+    far_per_h: float
+    far_per_h_ci: tuple[float, float]
+    target_inside: bool
+    confidence: float
+
+
+def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path, detector: str,
+                      target_per_h: float, split: str = "even", *, confidence: float = 0.95,
+                      k: int | None = None, n: int | None = None, grace_s: float = LATE_GRACE_S
+                      ) -> CalibrationCheck:
+    """Calibrate on the runs of even index (``split = "even"``; ``"odd"``: the other way) and
+    give the other half's false-alarm rate at that scale with its exact Poisson interval.
+
+    The held-out count is re-scored by the direct rule (:func:`rescore`), not by the
+    calibration's own sweep, so the two halves share nothing but the scale.
+    """
+    if split not in ("even", "odd"):
+        raise ValueError(f"split must be 'even' or 'odd', got {split!r}")
+    par = 0 if split == "even" else 1
+    fit = [r for r in records if int(r["index"]) % 2 == par]
+    held = [r for r in records if int(r["index"]) % 2 != par]
+    cal = calibrate_threshold(fit, out_dir, detector, target_per_h, k=k, n=n, grace_s=grace_s)
+    rs = rescore(held, out_dir, [cal.scale], k=k, n=n, grace_s=grace_s)
+    d = rs.detectors.get(detector)
+    if d is None or d.exposure_h <= 0:
+        raise StudyError(str(out_dir), detector, f"no held-out ({'odd' if par == 0 else 'even'}) completed run "
+                         f"with a log has {detector!r}", "fly more runs")
+    c = int(d.false_alarms[0])
+    lo, hi = poisson_rate_interval(c, d.exposure_h, confidence)
+    return CalibrationCheck(cal, split, d.runs, c, d.exposure_h, c / d.exposure_h, (lo, hi),
+                            bool(lo <= target_per_h <= hi), confidence)
+
+
+# --- the thresholds file of a study ------------------------------------------------------------------
 #: how the file's thresholds were made (the file's ``method``)
 STUDY_METHOD = (
     "per member: the threshold at which the member's false alarms per armed fault-free flight hour on the "
     "calibration half stay at or below far_per_h / members (exact inversion of the count, "
-    "fdi_sim.study.rescore.calibrate_threshold), checked on the held-out half (exact Poisson interval); the bank: "
+    "fdi_sim.study.calibration.calibrate_threshold), checked on the held-out half (exact Poisson interval); the bank: "
     "the OR of the members at those thresholds under the runs' k-of-n rule, against far_per_h")
 
 
@@ -50,9 +243,6 @@ def bank_rate(records: Sequence[Mapping[str, Any]], out_dir: str | Path, scales:
               *, confidence: float = 0.95, grace_s: float = LATE_GRACE_S) -> HeldRate:
     """False alarms of the bank (OR of its members, each at ``logged threshold x scales[id]``,
     each run's own k-of-n rule) on these runs, with the exact Poisson interval."""
-    from fdi_sim.study.rescore import _outside, _runs, exceedances, persistence
-    from fdi_sim.study.stats import exposure_s
-
     runs, _ = _runs(records, out_dir, None, None)
     c, expo = 0, 0.0
     for run in runs:
@@ -91,7 +281,6 @@ def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, spli
     from fdi_sim.sim.bank_design import design_hash, design_node, thresholds_source
     from fdi_sim.sim.run import build_loop_bank, build_sensors
     from fdi_sim.study.execute import load_records
-    from fdi_sim.study.rescore import check_calibration
     from fdi_sim.study.stats import completed
 
     out = Path(out_dir)
