@@ -218,3 +218,26 @@ def test_review_error_is_a_value_error() -> None:
     assert issubclass(ReviewError, ValueError)
     e = ReviewError("x.mcap", "what", "fix it")
     assert str(e) == "x.mcap: what. Fix: fix it"
+
+
+def test_cli_open_hands_a_file_url_to_the_browser(review_logs: dict[str, Path], tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--open``: the standard ``webbrowser`` module gets the page's file:// URL ($BROWSER is a
+    real program here that records what it was given)."""
+    import os
+    import time
+    import webbrowser
+
+    got = tmp_path / "url.txt"
+    prog = tmp_path / "browser.sh"
+    prog.write_text(f'#!/bin/sh\nprintf "%s" "$1" > "{got}"\n')
+    prog.chmod(0o755)
+    monkeypatch.setenv("BROWSER", str(prog))
+    monkeypatch.setattr(webbrowser, "_tryorder", None)
+    monkeypatch.setattr(webbrowser, "_browsers", {})
+    out = tmp_path / "r.html"
+    assert main(["review", str(review_logs["no_bank"]), "--quiet", "--open", "--out", str(out)]) == 0
+    deadline = time.time() + 20
+    while time.time() < deadline and not (got.exists() and got.stat().st_size):
+        time.sleep(0.05)
+    assert got.read_text() == out.resolve().as_uri() and os.path.isfile(out)
