@@ -348,7 +348,7 @@ def _timeline(ctx: _Context) -> Figure:
                                  "line-ns-open", text=[f"{d}: node {a} -> {b}" for _, d, a, b in sw], size=12,
                                  group=g))
         op = r.vector(TOPIC_OPERATING_POINT)
-        if op is not None and "icing_eta" in op.fields and np.nanmax(np.abs(op["icing_eta"])) > 0:
+        if op is not None and "icing_eta" in op.fields and bool(np.any(op["icing_eta"] > 0)):
             icing.append((r, op))
     rows = list(dict.fromkeys(rows)) or ["(no faults, no detectors)"]
     heights = [max(1.0, 0.22 * len(rows))] + ([0.8] if icing else [])

@@ -72,15 +72,18 @@ def display_unit(name: str) -> tuple[str, str, float]:
 
 
 def dom_id(text: str) -> str:
+    """A DOM id fragment from a detector id or signal name (``offline/kalman-nis-v1`` -> ``offline-kalman-nis-v1``)."""
     return re.sub(r"[^A-Za-z0-9_-]+", "-", text)
 
 
 # --- layout helpers ---------------------------------------------------------------------------
 def axis_key(i: int, letter: str) -> str:
+    """Layout key of panel ``i``'s axis (1-based): ``xaxis``, ``yaxis3``."""
     return f"{letter}axis" if i == 1 else f"{letter}axis{i}"
 
 
 def axis_ref(i: int, letter: str) -> str:
+    """A trace's reference to panel ``i``'s axis: ``x``, ``y3``."""
     return letter if i == 1 else f"{letter}{i}"
 
 
@@ -90,7 +93,20 @@ def panel_layout(span_s: tuple[float, float], ylabels: Sequence[str], *, title: 
                  heights: Sequence[float] | None = None) -> dict[str, Any]:
     """Stacked panels sharing one time axis (``matches``: zooming one zooms all).
 
-    ``overlay`` maps a panel (1-based) to the label of a second y axis on its right.
+    Parameters
+    ----------
+    span_s : (float, float)
+        The time axis range [s] (the runs' span: a catalog window past the log's end is clipped here).
+    ylabels : sequence of str
+        One y label per panel, top to bottom, each with its unit.
+    bands : (shapes, annotations), optional
+        Fault-band shapes and their labels.
+    ylog : sequence of int
+        Panels (1-based) on a log y axis.
+    overlay : dict of int to str, optional
+        Panel -> label of a second y axis on its right (axes ``n + 1``, ``n + 2``, ... in panel order).
+    heights : sequence of float, optional
+        Relative panel heights; a unit weight is :data:`PANEL_PX` pixels.
     """
     n = len(ylabels)
     w = np.asarray(heights if heights is not None else [1.0] * n, dtype=np.float64)
@@ -125,15 +141,28 @@ def panel_layout(span_s: tuple[float, float], ylabels: Sequence[str], *, title: 
 
 
 def line(t: NDArray[np.float64], y: NDArray[np.float64], name: str, colour: str, *, panel: int = 1,
-          yaxis: int | None = None, dash: str | None = None, width: float = 1.3, group: str | None = None,
-          shape: str | None = None) -> dict[str, Any]:
-    line: dict[str, Any] = {"color": colour, "width": width}
+         yaxis: int | None = None, dash: str | None = None, width: float = 1.3, group: str | None = None,
+         shape: str | None = None) -> dict[str, Any]:
+    """A ``scatter`` line trace on panel ``panel`` (or on y axis ``yaxis``, an overlay).
+
+    Parameters
+    ----------
+    t : NDArray
+        Times [s] (stored at 1 ms).
+    y : NDArray
+        Values in the unit the axis names (stored at 6 significant digits, NaN as a gap).
+    width : float
+        Line width [px].
+    shape : str, optional
+        ``"hv"`` for a step (flags such as ``valid``).
+    """
+    style: dict[str, Any] = {"color": colour, "width": width}
     if dash:
-        line["dash"] = dash
+        style["dash"] = dash
     if shape:
-        line["shape"] = shape
+        style["shape"] = shape
     tr: dict[str, Any] = {"type": "scatter", "mode": "lines", "name": name, "x": times(t), "y": values(y),
-                          "line": line, "xaxis": axis_ref(panel, "x"), "yaxis": axis_ref(yaxis or panel, "y"),
+                          "line": style, "xaxis": axis_ref(panel, "x"), "yaxis": axis_ref(yaxis or panel, "y"),
                           "connectgaps": False}
     if group:
         tr["legendgroup"] = group
@@ -141,7 +170,8 @@ def line(t: NDArray[np.float64], y: NDArray[np.float64], name: str, colour: str,
 
 
 def markers(t: Sequence[float], y: Sequence[Any], name: str, colour: str, symbol: str, *, panel: int = 1,
-             text: Sequence[str] | None = None, size: int = 9, group: str | None = None) -> dict[str, Any]:
+            text: Sequence[str] | None = None, size: int = 9, group: str | None = None) -> dict[str, Any]:
+    """Event markers at times ``t`` [s] (1 ms), ``y`` values or category rows, ``text`` on hover; ``size`` [px]."""
     tr: dict[str, Any] = {"type": "scatter", "mode": "markers", "name": name, "x": [round(float(v), 3) for v in t],
                           "y": list(y), "marker": {"color": colour, "symbol": symbol, "size": size,
                                                    "line": {"width": 1, "color": colour}},
@@ -155,7 +185,9 @@ def markers(t: Sequence[float], y: Sequence[Any], name: str, colour: str, symbol
 
 
 def bars(rows: list[tuple[str, list[tuple[float, float]]]], name: str, colour: str, width: float,
-          group: str) -> dict[str, Any] | None:
+         group: str) -> dict[str, Any] | None:
+    """One trace of horizontal bars on the category rows of panel 1: ``(row, [(start, end) [s], ...])``;
+    ``width`` [px]. None when there is no interval."""
     x: list[float | None] = []
     y: list[str | None] = []
     for row, spans in rows:
@@ -164,6 +196,6 @@ def bars(rows: list[tuple[str, list[tuple[float, float]]]], name: str, colour: s
             y += [row, row, None]
     if not x:
         return None
-    return {"type": "scatter", "mode": "lines", "name": name, "x": x, "y": y, "legendgroup": group,
-            "xaxis": "x", "yaxis": "y",
-            "line": {"color": colour, "width": width}, "opacity": 0.55, "hoverinfo": "x+y", "connectgaps": False}
+    return {"type": "scatter", "mode": "lines", "name": name, "x": x, "y": y, "legendgroup": group, "xaxis": "x",
+            "yaxis": "y", "line": {"color": colour, "width": width}, "opacity": 0.55, "hoverinfo": "x+y",
+            "connectgaps": False}
