@@ -156,3 +156,44 @@ def test_a_damaged_file_is_refused_naming_the_key(study, tmp_path: Path) -> None
         read_thresholds(bad)
     with pytest.raises(ScenarioError, match="cannot read the thresholds file"):
         read_thresholds(tmp_path / "missing.toml")
+
+
+def test_shipped_on_an_aircraft_without_a_file_is_refused() -> None:
+    from fdi_sim.scenario import load
+    from fdi_sim.scenario.loader import from_dict
+    from fdi_sim.scenario.shipped import shipped_dir
+    from fdi_sim.sim.bank_design import shipped_thresholds_path, thresholds_source
+
+    assert not shipped_thresholds_path("f16").is_file()  # the F-16 keeps its trained thresholds
+    d = json.loads(load(shipped_dir() / "f16_cruise_doublets.toml").to_json())
+    d["fdi"] = {**d.get("fdi", {}), "bank": "default", "thresholds": "shipped"}
+    with pytest.raises(ScenarioError, match=r"fdi\.thresholds: no shipped thresholds file for the f16"):
+        thresholds_source(from_dict(d, source="f16.toml"))
+    d["fdi"]["thresholds"] = "default"
+    assert thresholds_source(from_dict(d, source="f16.toml")) == (None, False)
+
+
+@pytest.mark.slow
+def test_the_shipped_dhc6_file_matches_the_bank_its_study_flies(tmp_path: Path) -> None:
+    """A run of the shipped calibration study, flown with thresholds = "shipped": the file matches
+    (design node and hash: a changed design, linearizer or sensor suite makes it refuse) and the
+    log records its thresholds and method (~1 min with a cold cache: the gust filter's training)."""
+    from fdi_sim.flightlog import read_log
+    from fdi_sim.scenario.loader import from_dict
+    from fdi_sim.sim import run
+    from fdi_sim.sim.bank_design import shipped_thresholds_path
+    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.study.spec import load_study
+
+    t = read_thresholds(shipped_thresholds_path("DHC6"))
+    st = load_study(Path(__file__).resolve().parents[2] / "scenarios" / "studies" / "dhc6_calibration.toml")
+    assert (t.study, t.runs) == (st.model.name, st.model.runs)
+    sc, _ = st.run_scenario(3)
+    d = json.loads(sc.to_json())
+    d["fdi"]["thresholds"] = "shipped"
+    d["duration_s"] = 50.0  # past the last doublet: the training flights fly the same maneuvers
+    res = run(from_dict(d, source="dhc6_calibration run 3"), tmp_path, progress=False)
+    cal = json.loads(read_log(res.log_path).metadata["fdi"]["calibration"])
+    assert [m["threshold"] for m in cal["members"]] == [m.threshold for m in t.members]
+    assert cal["study_identity"] == t.study_identity
+    assert cal["members"][0]["method"].startswith("calibration study dhc6_calibration (400 runs, 33.3 h), held-out")
