@@ -128,6 +128,9 @@ def report_sections(logs: Sequence[FlightLog], labels: Sequence[str]) -> tuple[S
     sensors = tuple(_sensor_figures(ctx))
     if sensors:
         sections.append(Section("sensors", "Faulty sensors: truth against measurement", None, sensors))
+    for tr in (tr for s in sections for f in s.figures for tr in f.spec["data"]):
+        if tr.get("legendgroup", "run-0") != "run-0":
+            tr.setdefault("opacity", 0.8)  # a later run drawn over the first lets it show where they agree
     return tuple(sections)
 
 
