@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, SerializerFunctionWrapHandler, model_serializer, model_validator
 
 
 class _Section(BaseModel):
@@ -128,6 +128,15 @@ class FdiSection(_Section):
                              "path of a thresholds file ending in .toml (`fdi-sim study STUDY --calibrate OUT.toml` "
                              "writes one)")
         return self
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        # thresholds is left out while it holds its default: a scenario's JSON (in every log, in a
+        # study's identity) is the same bytes as before the key existed
+        d = handler(self)
+        if self.thresholds == "default" and isinstance(d, dict):
+            d.pop("thresholds", None)
+        return d
 
 
 class LogSection(_Section):

@@ -186,10 +186,13 @@ def thresholds_source(sc: Scenario) -> tuple[Path | None, bool]:
                                 f"({path} does not exist)", 'use thresholds = "trained", or give the path of a file '
                                 "written by `fdi-sim study STUDY --calibrate OUT.toml`")
         return path, explicit
+    # a relative path: beside the scenario file (its source, before any " (bank design at ...)"
+    # suffix), else from the working directory; a missing file is reported by read_thresholds
     path = Path(mode)
-    if not path.is_absolute():
-        base = Path(sc.source.split(" (")[0]).parent if sc.source and not sc.source.startswith("<") else Path(".")
-        path = base / path if (base / path).is_file() or not path.is_file() else path
+    if not path.is_absolute() and not path.is_file():
+        beside = Path(sc.source.split(" (")[0]).parent / path
+        if beside.is_file():
+            path = beside
     return path, True
 
 

@@ -197,3 +197,17 @@ def test_the_shipped_dhc6_file_matches_the_bank_its_study_flies(tmp_path: Path) 
     assert [m["threshold"] for m in cal["members"]] == [m.threshold for m in t.members]
     assert cal["study_identity"] == t.study_identity
     assert cal["members"][0]["method"].startswith("calibration study dhc6_calibration (400 runs, 33.3 h), held-out")
+
+
+def test_a_relative_thresholds_path_is_read_beside_the_scenario_file(tmp_path: Path) -> None:
+    from fdi_sim.scenario import load
+    from fdi_sim.scenario.shipped import shipped_dir
+    from fdi_sim.sim.bank_design import thresholds_source
+
+    text = (shipped_dir() / "dhc6_elevator_loss.toml").read_text()
+    (tmp_path / "sub").mkdir()
+    p = tmp_path / "sub" / "flight.toml"
+    p.write_text(text.replace("[fdi]", '[fdi]\nthresholds = "mine.toml"', 1) if "[fdi]" in text
+                 else text + '\n[fdi]\nbank = "default"\nthresholds = "mine.toml"\n')
+    (tmp_path / "sub" / "mine.toml").write_text("")
+    assert thresholds_source(load(p)) == (tmp_path / "sub" / "mine.toml", True)
