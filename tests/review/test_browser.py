@@ -1,0 +1,337 @@
+"""The review report in a real browser: Debian's headless Chromium driven by playwright.
+
+For each report (a bank fault run, a comparison of two runs, a crashed run repaired by the review,
+a diverged run, an interrupted run) the page is opened from its ``file://`` URL with the network
+blocked (``context.route``) and every request recorded; it must make no request that is not
+``file:``/``data:``/``blob:``/``about:``, log no console error and raise no page error; every
+figure listed in ``<meta name="fdi-sim-figures">`` must become a plotly plot with traces drawn.
+A full-page screenshot is then checked (saved under ``tmp_path``; a failure names the file):
+not blank (pixel spread), each figure's box inked, each figure's plot area holding its traces'
+line colours, a plausible page height. A zoom (``Plotly.relayout`` of the statistic figure's
+x range) must leave points drawn. Issue 15, browser bar.
+
+Chromium comes from Debian (``make browser``: ``apt-get install -y chromium``); without
+``/usr/bin/chromium`` the module skips saying how to install it. ``playwright install`` is never used.
+"""
+from __future__ import annotations
+
+import io
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+import pytest
+
+CHROMIUM = Path("/usr/bin/chromium")
+pytestmark = pytest.mark.skipif(
+    not CHROMIUM.exists(),
+    reason=f"{CHROMIUM} not found: the browser tests need Debian's chromium "
+           "(`make browser` as root, or `sudo apt-get install -y chromium`)")
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-quic"]
+LOCAL_SCHEMES = ("file:", "data:", "blob:", "about:")
+VIEWPORT = {"width": 1280, "height": 900}
+RENDER_TIMEOUT_MS = 60_000
+#: which review_logs entries each report reads, and what its text must say happened
+REPORTS: dict[str, tuple[tuple[str, ...], str | None]] = {
+    "fault": (("fault",), None),
+    "comparison": (("fault", "fault_b"), None),
+    "crashed": (("unrepaired",), "repaired"),
+    "diverged": (("diverged",), "diverged"),
+    "interrupted": (("interrupted",), "interrupted"),
+}
+#: a pixel is ink when its darkest channel is below this (plotly's #eeeeee grid is not ink)
+INK_BELOW = 215
+#: a pixel has a trace's colour when every channel is within this of it
+COLOUR_TOLERANCE = 40
+#: a line trace is expected on the screenshot when this many of its points lie inside its axes
+MIN_VISIBLE_POINTS = 5
+
+# the state of each figure after rendering: its box on the page, its subplot areas, what it drew,
+# and per line trace (plotly's resolved _fullData) its colour, opacity and points inside the axes' ranges
+_FIGURE_STATE_JS = """ids => ids.map(id => {
+  const el = document.getElementById(id);
+  if (!el) return {id, missing: true};
+  const box = r => ({x: r.left + window.scrollX, y: r.top + window.scrollY, w: r.width, h: r.height});
+  const fl = el._fullLayout || {};
+  const axis = (ref, k) => fl[k + 'axis' + ref.slice(1)];
+  const inside = (v, a) => { const lo = Math.min(a.range[0], a.range[1]), hi = Math.max(a.range[0], a.range[1]);
+                             return v >= lo && v <= hi; };
+  const lines = (el._fullData || []).filter(t => t.visible === true && String(t.mode || '').includes('lines')
+                                              && t.line && t.line.color && (t.line.width === undefined || t.line.width > 0));
+  return {id, missing: false, plotly: el.classList.contains('js-plotly-plot'),
+          svg: el.querySelectorAll('.main-svg').length,
+          drawn: el.querySelectorAll('.trace').length + el.querySelectorAll('path.js-line').length,
+          traces: (el.data || []).length, text: el.textContent,
+          box: box(el.getBoundingClientRect()),
+          areas: [...el.querySelectorAll('.bglayer rect.bg, .bglayer .bg')].map(r => box(r.getBoundingClientRect())),
+          colours: lines.map(t => {
+            const xa = axis(t.xaxis || 'x', 'x'), ya = axis(t.yaxis || 'y', 'y'); let n = 0;
+            const xs = t.x || [], ys = t.y || [];
+            for (let i = 0; i < xs.length; i++) {
+              const x = xs[i], y = ys[i];
+              if (x === null || x === undefined || y === null || y === undefined) continue;
+              if (typeof x === 'number' && xa && xa.range && !inside(x, xa)) continue;
+              if (typeof y === 'number' && ya && ya.type !== 'category' && ya.range && !inside(y, ya)) continue;
+              n++;
+            }
+            return [t.line.color, t.opacity === undefined ? 1 : t.opacity, n]; })};
+})"""
+# drawn: a plotly plot with traces, or a figure without data that says so ("(no faults, no detectors)")
+_ALL_DRAWN_JS = """ids => ids.every(id => { const el = document.getElementById(id);
+  return el && el.classList.contains('js-plotly-plot') && el.querySelector('.main-svg')
+         && (el.querySelectorAll('.trace, path.js-line').length > 0
+             || ((el.data || []).length === 0 && /\\(no [^)]*\\)/.test(el.textContent))); })"""
+# points of every drawn line of a figure, inside its subplot areas (SVG path vertices)
+_DRAWN_POINTS_JS = """id => { const el = document.getElementById(id); let n = 0;
+  for (const p of el.querySelectorAll('path.js-line')) {
+    const d = p.getAttribute('d') || ''; n += (d.match(/[ML]/g) || []).length; }
+  return n; }"""
+
+
+@dataclass(frozen=True)
+class Rendered:
+    """One report after rendering in Chromium.
+
+    Attributes
+    ----------
+    name : str
+        Which report (a key of ``REPORTS``).
+    screenshot : Path
+        Full-page PNG.
+    figures : list of dict
+        ``_FIGURE_STATE_JS`` per figure id of the meta tag.
+    requests : list of str
+        Every URL the page requested.
+    errors : list of str
+        Console errors and page errors.
+    text : str
+        The page's visible text.
+    height_px : int
+        ``document.body.scrollHeight`` [px].
+    """
+
+    name: str
+    screenshot: Path
+    figures: list[dict[str, Any]]
+    requests: list[str]
+    errors: list[str]
+    text: str
+    height_px: int
+
+
+@pytest.fixture(scope="module")
+def reports(review_logs: dict[str, Path], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The reports, written by ``fdi-sim review`` (the CLI, as a user runs it)."""
+    out = tmp_path_factory.mktemp("reports")
+    paths = {}
+    for name, (keys, _) in REPORTS.items():
+        paths[name] = out / f"{name}.review.html"
+        done = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "review",
+                               *(str(review_logs[k]) for k in keys), "--out", str(paths[name])],
+                              capture_output=True, text=True, timeout=300, cwd=ROOT)
+        assert done.returncode == 0 and paths[name].exists(), (
+            f"fdi-sim review {keys} failed (exit {done.returncode}):\n{done.stdout}\n{done.stderr}")
+    return paths
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    """One headless Debian chromium for the module."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        chromium = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield chromium
+        chromium.close()
+
+
+class _Page:
+    """A page on a fresh context, network blocked, requests and errors recorded."""
+
+    def __init__(self, browser: Any) -> None:
+        self.requests: list[str] = []
+        self.errors: list[str] = []
+        self.context = browser.new_context(viewport=VIEWPORT, device_scale_factor=1)
+        self.context.route("**/*", self._route)
+        self.page = self.context.new_page()
+        self.page.on("request", lambda r: self.requests.append(r.url))
+        self.page.on("console", lambda m: self.errors.append(f"console.{m.type}: {m.text}")
+                     if m.type == "error" else None)
+        self.page.on("pageerror", lambda e: self.errors.append(f"pageerror: {e}"))
+
+    @staticmethod
+    def _route(route: Any) -> None:
+        if route.request.url.startswith(LOCAL_SCHEMES):
+            route.continue_()
+        else:
+            route.abort()  # recorded by the request handler; the test fails on it
+
+    def open(self, path: Path) -> list[str]:
+        """Load ``path``, wait until every figure of the meta tag is drawn; the figure ids."""
+        self.page.goto(path.resolve().as_uri(), wait_until="load", timeout=RENDER_TIMEOUT_MS)
+        meta = self.page.get_attribute('meta[name="fdi-sim-figures"]', "content")
+        assert meta is not None, f"{path.name}: no <meta name=\"fdi-sim-figures\">"
+        ids = meta.split()
+        assert ids, f"{path.name}: the fdi-sim-figures meta lists no figure"
+        try:
+            self.page.wait_for_function(_ALL_DRAWN_JS, arg=ids, timeout=RENDER_TIMEOUT_MS)
+        except Exception:  # noqa: BLE001 - playwright's TimeoutError; say which figures are not drawn
+            state = self.page.evaluate(_FIGURE_STATE_JS, ids)
+            bad = [(f["id"], {k: f.get(k) for k in ("missing", "plotly", "svg", "drawn")}) for f in state
+                   if f["missing"] or not f["plotly"] or not f["svg"] or not f["drawn"]]
+            raise AssertionError(f"{path.name}: figures not rendered within {RENDER_TIMEOUT_MS} ms: {bad}; "
+                                 f"errors {self.errors}") from None
+        return ids
+
+    def close(self) -> None:
+        self.context.close()
+
+
+def render(browser: Any, name: str, path: Path, shots: Path) -> Rendered:
+    """Open the report ``path``, let plotly draw, take a full-page screenshot."""
+    page = _Page(browser)
+    try:
+        ids = page.open(path)
+        assert page.page.locator(".fdi-figure").count() == len(ids), f"{name}: .fdi-figure count vs meta"
+        figures = page.page.evaluate(_FIGURE_STATE_JS, ids)
+        shot = shots / f"{name}.png"
+        page.page.screenshot(path=str(shot), full_page=True)
+        return Rendered(name, shot, figures, list(page.requests), list(page.errors),
+                        page.page.inner_text("body"), int(page.page.evaluate("document.body.scrollHeight")))
+    finally:
+        page.close()
+
+
+def _rgb(colour: str) -> np.ndarray:
+    """``#rrggbb`` or ``rgb(r, g, b)`` as three ints."""
+    if colour.startswith("#") and len(colour) == 7:
+        return np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)])
+    m = re.fullmatch(r"rgba?\(\s*(\d+)\s*,\s*(\d+)\s*,\s*(\d+)\s*(?:,\s*[\d.]+\s*)?\)", colour)
+    assert m is not None, f"unexpected trace colour {colour!r}"
+    return np.array([int(g) for g in m.groups()])
+
+
+def _crop(img: np.ndarray, box: dict[str, float]) -> np.ndarray:
+    x0, y0 = max(int(round(box["x"])), 0), max(int(round(box["y"])), 0)
+    return img[y0:y0 + int(box["h"]), x0:x0 + int(box["w"])]
+
+
+def screenshot_problems(r: Rendered) -> list[str]:
+    """What is wrong with the screenshot of ``r`` (empty when it is honest)."""
+    from PIL import Image
+
+    img = np.asarray(Image.open(r.screenshot).convert("RGB")).astype(np.int16)
+    problems: list[str] = []
+    empty: list[str] = []
+    if img.std() < 10:
+        problems.append(f"page nearly uniform (pixel std {img.std():.1f})")
+    n = len(r.figures)
+    if not (260 * n <= r.height_px <= 1500 * n + 8000):
+        problems.append(f"page height {r.height_px} px implausible for {n} figures")
+    if img.shape[0] < 0.95 * r.height_px:
+        problems.append(f"screenshot {img.shape[0]} px tall for a {r.height_px} px page")
+    for f in r.figures:
+        crop = _crop(img, f["box"])
+        if crop.size == 0 or f["box"]["h"] < 150:
+            problems.append(f"{f['id']}: box {f['box']} too small")
+            continue
+        if not f["plotly"] or not f["svg"]:
+            problems.append(f"{f['id']}: not a rendered plotly plot")
+            continue
+        if f["traces"] == 0 and re.search(r"\(no [^)]*\)", f["text"]):
+            empty.append(f["id"])  # a figure without data that says so ("(no faults, no detectors)")
+            continue
+        ink = float((crop.min(axis=-1) < INK_BELOW).mean())
+        if not 0.005 < ink < 0.6:
+            problems.append(f"{f['id']}: {ink:.3f} of its box is ink (blank or a solid block)")
+        areas = [_crop(img, a) for a in f["areas"] if a["w"] > 20 and a["h"] > 20]
+        if not areas:
+            problems.append(f"{f['id']}: no subplot area drawn")
+            continue
+        visible: dict[tuple[str, float], int] = {}
+        for colour, opacity, n_points in f["colours"]:
+            key = (colour, float(opacity))
+            visible[key] = visible.get(key, 0) + int(n_points)
+        expected = [k for k, n_points in visible.items() if n_points >= MIN_VISIBLE_POINTS]
+        if not expected:
+            empty.append(f["id"])  # nothing of it lies inside its axes (a run cut off before it)
+            continue
+        found = {}
+        for colour, opacity in expected:
+            # a translucent line over white, or over another line of the figure (two runs that agree)
+            wants = [opacity * _rgb(colour) + (1 - opacity) * under
+                     for under in [np.full(3, 255)] + [_rgb(c) for c, _ in expected if c != colour]]
+            found[(colour, opacity)] = sum(
+                int(np.logical_or.reduce([np.abs(a - w).max(axis=-1) < COLOUR_TOLERANCE for w in wants]).sum())
+                for a in areas)
+        # one run's lines may hide another's where two runs agree (comparison): a third must show
+        # a line of a few points inside the axes is short: it needs fewer pixels
+        need_px = min(150, 5 * max(visible[k] for k in expected))
+        if max(found.values()) < need_px or sum(v >= 20 for v in found.values()) < -(-len(found) // 3):
+            problems.append(f"{f['id']}: trace colours in its plot areas (pixels): {found}")
+    if len(empty) > 0.4 * n:
+        problems.append(f"{len(empty)} of {n} figures have nothing inside their axes: {empty}")
+    return problems
+
+
+@pytest.mark.parametrize("name", list(REPORTS))
+def test_report_renders_offline_with_every_figure(browser: Any, reports: dict[str, Path], name: str,
+                                                  tmp_path: Path) -> None:
+    r = render(browser, name, reports[name], tmp_path)
+    where = f"(screenshot {r.screenshot})"
+    remote = [u for u in r.requests if not u.startswith(LOCAL_SCHEMES)]
+    assert remote == [], f"{name}: the page asked the network for {remote} {where}"
+    assert r.requests and r.requests[0].startswith("file:"), r.requests
+    assert r.errors == [], f"{name}: console/page errors {r.errors} {where}"
+    problems = screenshot_problems(r)
+    assert problems == [], f"{name}: the screenshot is not honest: {problems} {where}"
+    word = REPORTS[name][1]
+    if word is not None:
+        assert word in r.text.lower(), f"{name}: the report never says {word!r} {where}"
+
+
+def test_screenshot_check_fails_on_a_blank_page(browser: Any, tmp_path: Path) -> None:
+    """The screenshot check is live: a page whose figures are empty divs fails it."""
+    page = tmp_path / "blank.html"
+    page.write_text('<html><head><meta name="fdi-sim-figures" content="a b"></head><body>'
+                    '<div id="a" class="fdi-figure" style="height:400px"></div>'
+                    '<div id="b" class="fdi-figure" style="height:400px"></div></body></html>')
+    p = _Page(browser)
+    try:
+        p.page.goto(page.as_uri())
+        figures = p.page.evaluate(_FIGURE_STATE_JS, ["a", "b"])
+        shot = tmp_path / "blank.png"
+        p.page.screenshot(path=str(shot), full_page=True)
+        r = Rendered("blank", shot, figures, p.requests, p.errors, "", 900)
+    finally:
+        p.close()
+    problems = screenshot_problems(r)
+    assert any("uniform" in x for x in problems) and any("a: not a rendered plotly" in x for x in problems), problems
+
+
+def test_zoom_on_the_statistic_figure_keeps_points_drawn(browser: Any, reports: dict[str, Path],
+                                                         tmp_path: Path) -> None:
+    page = _Page(browser)
+    try:
+        ids = page.open(reports["fault"])
+        stat = next(i for i in ids if i.endswith("-statistic"))
+        before = page.page.evaluate(_DRAWN_POINTS_JS, stat)
+        t0_s, t1_s = page.page.evaluate(f"document.getElementById('{stat}')._fullLayout.xaxis.range")
+        a_s, b_s = t0_s + 0.4 * (t1_s - t0_s), t0_s + 0.6 * (t1_s - t0_s)
+        page.page.evaluate(f"Plotly.relayout('{stat}', {{'xaxis.range': [{a_s}, {b_s}]}})")
+        page.page.wait_for_function(f"""() => {{ const r = document.getElementById('{stat}')._fullLayout.xaxis.range;
+            return Math.abs(r[0] - {a_s}) < 1e-6 && Math.abs(r[1] - {b_s}) < 1e-6; }}""", timeout=10_000)
+        after = page.page.evaluate(_DRAWN_POINTS_JS, stat)
+        shot = tmp_path / "zoomed.png"
+        page.page.locator(f"#{stat}").screenshot(path=str(shot))
+        assert page.errors == [], page.errors
+    finally:
+        page.close()
+    assert before > 0 and after > 0, f"{stat}: points drawn {before} before the zoom, {after} after ({shot})"
