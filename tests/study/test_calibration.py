@@ -211,3 +211,20 @@ def test_a_relative_thresholds_path_is_read_beside_the_scenario_file(tmp_path: P
                  else text + '\n[fdi]\nbank = "default"\nthresholds = "mine.toml"\n')
     (tmp_path / "sub" / "mine.toml").write_text("")
     assert thresholds_source(load(p)) == (tmp_path / "sub" / "mine.toml", True)
+
+
+def test_a_default_shipped_source_that_does_not_cover_the_bank_says_so_in_the_log(study, monkeypatch) -> None:
+    """With ``"shipped"`` as an aircraft's default, a bank the shipped file does not match (here:
+    the test study's bank, whose gust filter is trained on 6 x 60 s flights, not the shipped
+    study's 24 x 300 s) flies its trained thresholds, and its log's calibration record says why."""
+    from fdi_sim.flightlog import read_log
+    from fdi_sim.scenario import load
+    from fdi_sim.sim import bank_design, run
+    from fdi_sim.sim.calibrate import read_thresholds
+
+    out, thr, _, tmp = study
+    monkeypatch.setitem(bank_design.DEFAULT_THRESHOLDS, "DHC6", "shipped")
+    res = run(load(_run_scenario(out, tmp, "default")), tmp / "logs", progress=False)
+    cal = json.loads(read_log(res.log_path).metadata["fdi"]["calibration"])
+    assert cal["source"] == "trained" and "does not cover this bank's design" in cal["note"]
+    assert [m["threshold"] for m in cal["members"]] == [m.trained_threshold for m in read_thresholds(thr).members]
