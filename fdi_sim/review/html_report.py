@@ -16,13 +16,15 @@ import html
 import os
 import tempfile
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from fdi_sim.errors import ReviewError
 from fdi_sim.flightlog.reader import FlightLog
 from fdi_sim.review.run_review import DetectorReview, RunReview, windows_text
 
 CSS = """
+nav.toc{font-size:.9em;margin:.4em 0 1em} nav.toc a{color:#0b5cad;text-decoration:none}
+details.fold>summary{cursor:pointer;color:#0b5cad;margin:.3em 0}
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:1.5em auto;max-width:1200px;
      color:#1b1f24;padding:0 1em;line-height:1.4}
 h1{font-size:1.45em;margin-bottom:.1em} h2{font-size:1.2em;border-bottom:1px solid #ccd;padding-bottom:.2em;
@@ -59,6 +61,17 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[object]], cls: str = "",
         rc = f' class="{row_cls[i]}"' if row_cls and row_cls[i] else ""
         out.append(f"<tr{rc}>" + "".join(f"<td>{v if raw else _e(v)}</td>" for v in r) + "</tr>")
     return "\n".join(out) + "</tbody></table>"
+
+
+#: a table longer than this is folded into a <details> element, so the figures stay near the top
+FOLD_ROWS = 12
+
+
+def _folded(summary: str, n_rows: int, table: str) -> str:
+    """``table`` as it is, or folded under ``summary`` when it has more than :data:`FOLD_ROWS` rows."""
+    if n_rows <= FOLD_ROWS:
+        return table
+    return f'<details class="fold"><summary>{_e(summary)} ({n_rows} rows: show)</summary>{table}</details>'
 
 
 def _detection_cell(r: RunReview, fault: str) -> str:
@@ -132,9 +145,13 @@ def _run_details(r: RunReview, tag: str) -> str:
                       [(f.label, f.type, f.target, windows_text(f.windows_s, r.t_end_s))
                        for f in r.faults]))
     out.append(f"<h3>{_e(tag)}Failure log</h3>")
-    out.append(_table(("t [s]", "event", "detector", "hypothesis", "kind", "nature", "duration [s]"),
-                      [(f"{x.t_s:.2f}", x.event, x.detector, x.hypothesis, x.kind, x.nature,
-                        "" if x.duration_s is None else f"{x.duration_s:.2f}") for x in r.failure_log]))
+    onsets = [x for x in r.failure_log if x.event == "onset"]
+    first = (f"first onset {onsets[0].t_s:.2f} s: {onsets[0].detector}, {onsets[0].hypothesis}" if onsets
+             else "no onset")
+    out.append(_folded(f"{len(r.failure_log)} entries, {len(onsets)} onsets; {first}", len(r.failure_log),
+                       _table(("t [s]", "event", "detector", "hypothesis", "kind", "nature", "duration [s]"),
+                              [(f"{x.t_s:.2f}", x.event, x.detector, x.hypothesis, x.kind, x.nature,
+                                "" if x.duration_s is None else f"{x.duration_s:.2f}") for x in r.failure_log])))
     out.append(f"<h3>{_e(tag)}Reconfigurations</h3>")
     out.append(_table(("t [s]", "action", "sensor", "by", "confirmed by"),
                       [(f"{x.t_s:.2f}", x.action, x.sensor, x.detector, x.confirmed_by) for x in r.reconfigurations]))
@@ -163,7 +180,9 @@ def _episode_table(reviews: Sequence[RunReview], det: str) -> str:
         if d is not None:
             detail.append(_table(DETECTOR_HEAD, _detector_rows(r, d)) if len(reviews) == 1 else
                           f"<p><b>{k}</b></p>" + _table(DETECTOR_HEAD, _detector_rows(r, d)))
-    return "\n".join(detail) + "<p>Alarm episodes:</p>" + _table(head, rows)
+    n_false = sum(1 for r in rows if r[-1] == "FALSE ALARM")
+    return "\n".join(detail) + "<p>Alarm episodes:</p>" + _folded(
+        f"{len(rows)} alarm episodes, {n_false} false", len(rows), _table(head, rows))
 
 
 def render_report(reviews: Sequence[RunReview], sections: Sequence[object], changes: Sequence[str] = ()) -> str:
@@ -181,16 +200,32 @@ def render_report(reviews: Sequence[RunReview], sections: Sequence[object], chan
         body += ['<section id="scenario-changes"><h2>What differs in the scenario (A &rarr; B)</h2>',
                  "<ul>" + "".join(f"<li><code>{_e(c)}</code></li>" for c in changes) + "</ul>" if changes
                  else '<p class="none">nothing: the same scenario text</p>', "</section>"]
-    for k, r in zip(("",) if len(reviews) == 1 else ("A: ", "B: "), reviews):
-        body += [f'<section id="run{"-" + k[0].lower() if k else ""}"><h2>{_e(k)}Run details</h2>',
-                 _run_details(r, k), "</section>"]
-    for s in sections:
+    # what a reviewer looks at first: the headline, then the timeline, then the details and the rest
+    ordered = sorted(sections, key=lambda s: s.id != "timeline")
+    toc = [("headline", "Headline")] + [(s.id, s.title) for s in ordered[:1] if s.id == "timeline"]
+    toc += [(f'run{"-" + k[0].lower() if k else ""}', f"{k}Run details")
+            for k in (("",) if len(reviews) == 1 else ("A: ", "B: "))]
+    toc += [(s.id, s.title) for s in ordered if s.id != "timeline"] + [("notes", "Notes")]
+    body.insert(2, '<nav class="toc">' + " &middot; ".join(f'<a href="#{_e(i)}">{_e(t)}</a>' for i, t in toc)
+                + "</nav>")
+
+    def _section(s: Any) -> None:
         body.append(f'<section id="{_e(s.id)}"><h2>{_e(s.title)}</h2>')
         if s.detector is not None:
             body.append(_episode_table(reviews, s.detector))
         for f in s.figures:
-            body += [f"<h3>{_e(f.title)}</h3>", figure_html(f), f'<p class="caption">{_e(f.caption)}</p>']
+            body.extend([f"<h3>{_e(f.title)}</h3>", figure_html(f), f'<p class="caption">{_e(f.caption)}</p>'])
         body.append("</section>")
+
+    for s in ordered[:1]:
+        if s.id == "timeline":
+            _section(s)
+    for k, r in zip(("",) if len(reviews) == 1 else ("A: ", "B: "), reviews):
+        body += [f'<section id="run{"-" + k[0].lower() if k else ""}"><h2>{_e(k)}Run details</h2>',
+                 _run_details(r, k), "</section>"]
+    for s in ordered:
+        if s.id != "timeline":
+            _section(s)
     notes = [(k, n) for k, r in zip(("",) if len(reviews) == 1 else ("A: ", "B: "), reviews) for n in r.notes]
     body += ['<section id="notes"><h2>Notes</h2>', "<ul>" + "".join(f"<li>{_e(k)}{_e(n)}</li>" for k, n in notes)
              + "</ul>" if notes else '<p class="none">none</p>', "</section>"]
