@@ -99,6 +99,11 @@ def test_wheel_install_lists_and_loads_shipped_files(tmp_path: Path) -> None:
     assert Path(got["package"]).parent == site / "fdi_sim"
     assert got["loaded"] == len(rows)
     assert Path(got["resolved"]) == installed / "f16_pitch_gyro_bias.toml"
+    # the Foxglove layout and the DHC-6 thresholds file ship too, byte for byte
+    for rel in ("review/foxglove/fdi-sim-layout.json",):
+        assert (site / "fdi_sim" / rel).read_bytes() == (ROOT / "fdi_sim" / rel).read_bytes(), rel
+    assert (site / "fdi_sim" / "_aircraft" / "DHC6" / "fdi_thresholds.toml").read_bytes() == (
+        ROOT / "aircraft" / "DHC6" / "fdi_thresholds.toml").read_bytes()
 
 
 def test_listing_in_checkout_matches_the_folder() -> None:
