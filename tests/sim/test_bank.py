@@ -206,6 +206,17 @@ def test_gain_scheduled_bank_in_the_loop_equals_its_replay(tmp_path):
     assert len(np.unique(pts)) >= 2 and np.count_nonzero(np.diff(pts)) <= 4  # switched, without chattering
     rep, same = replay_bank(res.log_path)
     assert same and all(same.values())
+    # the review of the log names the same switches, and its timeline marks them (issue 15)
+    from fdi_sim.review.figures import report_sections
+    from fdi_sim.review.run_review import review_log
+
+    t_stat = log.topics["/fdi/kalman-gust-v1/statistic"].t_s
+    changed = np.flatnonzero(np.diff(pts)) + 1
+    gust = next(d for d in review_log(res.log_path).detectors if d.id == "kalman-gust-v1")
+    assert [(t, p) for t, p in gust.schedule_switches] == [(float(t_stat[j]), int(pts[j])) for j in changed]
+    timeline = next(s for s in report_sections([log], [""]) if s.id == "timeline").figures[0]
+    marked = [x for tr in timeline.spec["data"] if "schedule switch" in str(tr.get("name", "")) for x in tr["x"]]
+    assert sorted(marked) == pytest.approx(sorted(float(t_stat[j]) for j in changed), abs=1e-3)
 
 
 def test_actuator_reconfiguration_makes_up_a_lost_elevator(tmp_path):
