@@ -50,6 +50,8 @@ REPORTS: dict[str, tuple[tuple[str, ...], str | None]] = {
 INK_BELOW = 215
 #: a pixel has a trace's colour when every channel is within this of it
 COLOUR_TOLERANCE = 40
+#: pixels within this of white in every channel are background (white, the #eeeeee grid)
+NEAR_WHITE = 20
 #: a line trace is expected on the screenshot when this many of its points lie inside its axes
 MIN_VISIBLE_POINTS = 5
 
@@ -194,11 +196,14 @@ class _Page:
         self.context.close()
 
 
-def render(browser: Any, name: str, path: Path, shots: Path) -> Rendered:
-    """Open the report ``path``, let plotly draw, take a full-page screenshot."""
+def render(browser: Any, name: str, path: Path, shots: Path, css: str = "") -> Rendered:
+    """Open the report ``path``, let plotly draw, take a full-page screenshot (after adding
+    ``css``, which only the tests of the check itself use)."""
     page = _Page(browser)
     try:
         ids = page.open(path)
+        if css:
+            page.page.add_style_tag(content=css)
         assert page.page.locator(".fdi-figure").count() == len(ids), f"{name}: .fdi-figure count vs meta"
         figures = page.page.evaluate(_FIGURE_STATE_JS, ids)
         shot = shots / f"{name}.png"
@@ -230,8 +235,9 @@ def screenshot_problems(r: Rendered) -> list[str]:
     img = np.asarray(Image.open(r.screenshot).convert("RGB")).astype(np.int16)
     problems: list[str] = []
     empty: list[str] = []
-    if img.std() < 10:
-        problems.append(f"page nearly uniform (pixel std {img.std():.1f})")
+    spread = float(img[::4, ::4].std())  # every 16th pixel: the spread of the page
+    if spread < 10:
+        problems.append(f"page nearly uniform (pixel std {spread:.1f})")
     n = len(r.figures)
     if not (260 * n <= r.height_px <= 1500 * n + 8000):
         problems.append(f"page height {r.height_px} px implausible for {n} figures")
@@ -263,14 +269,21 @@ def screenshot_problems(r: Rendered) -> list[str]:
         if not expected:
             empty.append(f["id"])  # nothing of it lies inside its axes (a run cut off before it)
             continue
+        px = np.concatenate([a.reshape(-1, 3) for a in areas])
+        px = px[(255 - px).max(axis=-1) > NEAR_WHITE]  # white and the #eeeeee grid are no trace
+        px = px.astype(np.int32)
+        packed, weight = np.unique((px[:, 0] << 16) | (px[:, 1] << 8) | px[:, 2],
+                                   return_counts=True)  # distinct colours and their pixel counts
+        px = np.stack([packed >> 16, (packed >> 8) & 255, packed & 255], axis=-1)
         found = {}
         for colour, opacity in expected:
             # a translucent line over white, or over another line of the figure (two runs that agree)
             wants = [opacity * _rgb(colour) + (1 - opacity) * under
                      for under in [np.full(3, 255)] + [_rgb(c) for c, _ in expected if c != colour]]
-            found[(colour, opacity)] = sum(
-                int(np.logical_or.reduce([np.abs(a - w).max(axis=-1) < COLOUR_TOLERANCE for w in wants]).sum())
-                for a in areas)
+            hit = np.zeros(len(px), dtype=bool)
+            for want in wants:
+                hit |= np.abs(px - want).max(axis=-1) < COLOUR_TOLERANCE
+            found[(colour, opacity)] = int(weight[hit].sum())
         # one run's lines may hide another's where two runs agree (comparison): a third must show
         # a line of a few points inside the axes is short: it needs fewer pixels
         need_px = min(150, 5 * max(visible[k] for k in expected))
@@ -314,6 +327,17 @@ def test_screenshot_check_fails_on_a_blank_page(browser: Any, tmp_path: Path) ->
         p.close()
     problems = screenshot_problems(r)
     assert any("uniform" in x for x in problems) and any("a: not a rendered plotly" in x for x in problems), problems
+
+
+def test_screenshot_check_fails_when_the_lines_are_not_painted(browser: Any, reports: dict[str, Path],
+                                                               tmp_path: Path) -> None:
+    """The real fault report with its SVG lines hidden: the DOM still has every trace, the
+    screenshot check must see that the pixels lack the trace colours."""
+    r = render(browser, "fault-hidden-lines", reports["fault"], tmp_path,
+               css="path.js-line, .scatterlayer .trace path { visibility: hidden !important; }")
+    problems = screenshot_problems(r)
+    lacking = [x for x in problems if "trace colours" in x]
+    assert len(lacking) >= len(r.figures) // 2, problems
 
 
 def test_zoom_on_the_statistic_figure_keeps_points_drawn(browser: Any, reports: dict[str, Path],
