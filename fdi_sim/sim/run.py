@@ -561,6 +561,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     x_buf = (ctypes.c_double * len(truth_names))()
     x_arr = np.ctypeslib.as_array(x_buf)
     step_jsbsim = ac.stepper()
+    isfinite, sqrt, deg_per_rad = math.isfinite, math.sqrt, DEG_PER_RAD  # locals: no global look-up per step
     y = np.empty(len(sensors.names))  # the measurements of the fast path (refilled each step)
     u_arr = np.empty(9)  # the pilot's commands and references (refilled each step), then the trim
     write_cmd = ac.command_writer()
@@ -612,7 +613,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
             t_s = k * dt
             xl = read_truth()
             # --- divergence checks on the truth (NaN, ground, departure) -------------------------
-            if not math.isfinite(sum(xl)):  # one NaN or inf makes the sum non-finite
+            if not isfinite(sum(xl)):  # one NaN or inf makes the sum non-finite
                 bad = [truth_names[i] for i in np.flatnonzero(~np.isfinite(np.array(xl)))[:3]]
                 raise SimulationDiverged(t_s, f"non-finite state ({', '.join(bad)})")
             if h_agl_node() <= 0.0:
@@ -667,10 +668,10 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 if cmd_rows is not None:
                     cmd_rows[k % K] = cmd
             # --- statistics: deviation from the references (airspeed relative to the steady air) --
-            v_air = math.sqrt((xl[i_vn] - wn) ** 2 + (xl[i_ve] - we) ** 2 + xl[i_vd] ** 2)
+            v_air = sqrt((xl[i_vn] - wn) ** 2 + (xl[i_ve] - we) ** 2 + xl[i_vd] ** 2)
             dv = abs(xl[i_vc] * v_air / xl[i_vt] - vc_ref)
             dh = abs(xl[i_h] - h_ref)
-            dphi = abs(xl[i_phi] - phi_ref) * DEG_PER_RAD
+            dphi = abs(xl[i_phi] - phi_ref) * deg_per_rad
             if dh > max_dh:
                 max_dh = dh
             if dv > max_dv:

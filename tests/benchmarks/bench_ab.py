@@ -8,8 +8,10 @@ trial lets the load hit both alike. ``base`` is a copy of another commit's tree:
     python tests/benchmarks/bench_ab.py /tmp/base [trials] [duration_s]
 
 Each trial is a fresh process on one tree: a 60 s warm-up flight (design cached, kernels loaded),
-then bare JSBSim and the study-mode flight (``check_study_logs.study_text``) twice, interleaved;
-it reports the best of each as us/step. Printed: per tree and aircraft the median over the trials
+then bare JSBSim and the study-mode flight (``check_study_logs.study_text``) twice, interleaved,
+in CPU time of the process (``time.process_time``: far steadier than wall time when other jobs
+share the cores), the loop's per step from a long and a 60 s flight (the set-up cancels); it
+reports the best of each as us/step. Printed: per tree and aircraft the median over the trials
 of the ratio and of the loop's overhead over bare (us/step). Never a timed assertion in the suite.
 """
 from __future__ import annotations
@@ -24,20 +26,32 @@ HERE = Path(__file__).resolve().parent
 NEW = HERE.parents[1]
 
 TRIAL = r"""
-import sys, tempfile
+import sys, tempfile, time
 sys.path.insert(0, {here!r})
-from bench_loop import bare_rate
+from fdi_sim.aircraft import Aircraft, Atmosphere, trim
 from bench_split import _study_scenario
 from fdi_sim.sim import run
 name, T = {name!r}, {T!r}
-sc = _study_scenario(name, T)
+sc, short = _study_scenario(name, T), _study_scenario(name, 60.0)
 bare, loop = [], []
+def cpu_run(s, d):
+    c0 = time.process_time()
+    r = run(s, d, progress=False).summary
+    return time.process_time() - c0, r.steps
 with tempfile.TemporaryDirectory() as d:
-    run(_study_scenario(name, 60.0), d, progress=False)
+    run(short, d, progress=False)
     for _ in range(2):
-        bare.append(1e6 / bare_rate(sc.aircraft, sc, min(T, 120.0)))
-        r = run(sc, d, progress=False).summary
-        loop.append(1e6 * r.wall_s / r.steps)
+        ac = Aircraft(sc.aircraft, sc.dt_s)  # bench_loop.bare_rate in CPU time
+        trim(ac, sc.operating_point())
+        ac.set_atmosphere(Atmosphere("moderate"), 1)
+        write, n = ac.command_writer(), int(min(T, 120.0) / sc.dt_s)
+        c0 = time.process_time()
+        for _ in range(n):
+            write(0.0, 0.0, 0.0, 0.3)
+            ac.step()
+        bare.append(1e6 * (time.process_time() - c0) / n)
+        (c_long, n_long), (c_short, n_short) = cpu_run(sc, d), cpu_run(short, d)
+        loop.append(1e6 * (c_long - c_short) / (n_long - n_short))  # the set-up cancels
 print(min(bare), min(loop))
 """
 
