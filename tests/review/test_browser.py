@@ -90,10 +90,17 @@ _ALL_DRAWN_JS = """ids => ids.every(id => { const el = document.getElementById(i
   return el && el.classList.contains('js-plotly-plot') && el.querySelector('.main-svg')
          && (el.querySelectorAll('.trace, path.js-line').length > 0
              || ((el.data || []).length === 0 && /\\(no [^)]*\\)/.test(el.textContent))); })"""
-# points of every drawn line of a figure, inside its subplot areas (SVG path vertices)
-_DRAWN_POINTS_JS = """id => { const el = document.getElementById(id); let n = 0;
-  for (const p of el.querySelectorAll('path.js-line')) {
-    const d = p.getAttribute('d') || ''; n += (d.match(/[ML]/g) || []).length; }
+# vertices of the drawn lines of a figure that fall inside their subplot (SVG coordinates are
+# relative to the subplot: 0..axis._length); plotly keeps out-of-view vertices, clipped
+_DRAWN_POINTS_JS = """id => { const el = document.getElementById(id); const fl = el._fullLayout; let n = 0;
+  for (const g of el.querySelectorAll('.scatterlayer .trace')) {
+    const cd = g.__data__; const t = cd && cd[0] && cd[0].trace; if (!t) continue;
+    const xa = fl['xaxis' + (t.xaxis || 'x').slice(1)], ya = fl['yaxis' + (t.yaxis || 'y').slice(1)];
+    for (const p of g.querySelectorAll('path.js-line')) {
+      const v = (p.getAttribute('d') || '').match(/-?[0-9.]+(?:e-?[0-9]+)?/g) || [];
+      for (let i = 0; i + 1 < v.length; i += 2) {
+        const x = +v[i], y = +v[i + 1];
+        if (x >= 0 && x <= xa._length && y >= 0 && y <= ya._length) n++; } } }
   return n; }"""
 
 
@@ -355,7 +362,11 @@ def test_zoom_on_the_statistic_figure_keeps_points_drawn(browser: Any, reports: 
         after = page.page.evaluate(_DRAWN_POINTS_JS, stat)
         shot = tmp_path / "zoomed.png"
         page.page.locator(f"#{stat}").screenshot(path=str(shot))
+        # the count is of points in view: a window past the end of the flight holds none
+        page.page.evaluate(f"Plotly.relayout('{stat}', {{'xaxis.range': [{t1_s + 100.0}, {t1_s + 200.0}]}})")
+        away = page.page.evaluate(_DRAWN_POINTS_JS, stat)
         assert page.errors == [], page.errors
     finally:
         page.close()
     assert before > 0 and after > 0, f"{stat}: points drawn {before} before the zoom, {after} after ({shot})"
+    assert away == 0, f"{stat}: {away} points drawn inside a window beyond the flight: the count is not live"
