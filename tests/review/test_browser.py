@@ -336,6 +336,23 @@ def test_screenshot_check_fails_on_a_blank_page(browser: Any, tmp_path: Path) ->
     assert any("uniform" in x for x in problems) and any("a: not a rendered plotly" in x for x in problems), problems
 
 
+def test_a_remote_request_is_seen_and_blocked(browser: Any, tmp_path: Path) -> None:
+    """The request recorder and the route are live: a page loading a remote image is caught and
+    the image never arrives (the machine's network is not needed: the route aborts it)."""
+    page = tmp_path / "remote.html"
+    page.write_text('<html><body><img id="i" src="https://example.com/logo.png">'
+                    '<script src="https://cdn.plot.ly/plotly-2.35.2.min.js"></script></body></html>')
+    p = _Page(browser)
+    try:
+        p.page.goto(page.as_uri(), wait_until="load")
+        loaded = p.page.evaluate("document.getElementById('i').naturalWidth")
+        remote = [u for u in p.requests if not u.startswith(LOCAL_SCHEMES)]
+    finally:
+        p.close()
+    assert sorted(remote) == ["https://cdn.plot.ly/plotly-2.35.2.min.js", "https://example.com/logo.png"]
+    assert loaded == 0
+
+
 def test_screenshot_check_fails_when_the_lines_are_not_painted(browser: Any, reports: dict[str, Path],
                                                                tmp_path: Path) -> None:
     """The real fault report with its SVG lines hidden: the DOM still has every trace, the
