@@ -15,7 +15,6 @@ Chromium comes from Debian (``make browser``: ``apt-get install -y chromium``); 
 """
 from __future__ import annotations
 
-import io
 import re
 import subprocess
 import sys
@@ -189,9 +188,11 @@ class _Page:
         assert meta is not None, f"{path.name}: no <meta name=\"fdi-sim-figures\">"
         ids = meta.split()
         assert ids, f"{path.name}: the fdi-sim-figures meta lists no figure"
+        from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
         try:
             self.page.wait_for_function(_ALL_DRAWN_JS, arg=ids, timeout=RENDER_TIMEOUT_MS)
-        except Exception:  # noqa: BLE001 - playwright's TimeoutError; say which figures are not drawn
+        except PlaywrightTimeout:  # say which figures are not drawn
             state = self.page.evaluate(_FIGURE_STATE_JS, ids)
             bad = [(f["id"], {k: f.get(k) for k in ("missing", "plotly", "svg", "drawn")}) for f in state
                    if f["missing"] or not f["plotly"] or not f["svg"] or not f["drawn"]]
