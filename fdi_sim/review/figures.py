@@ -15,6 +15,7 @@ Angles are logged in rad and shown in degrees; every axis names its unit.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Sequence
@@ -88,12 +89,40 @@ class Section:
     detector : str or None
         The detector id of a per-detector section.
     figures : tuple of Figure
+        Only figures with something to draw.
+    notes : tuple of str
+        What was left out and why (a figure whose signals hold no finite sample in this log).
     """
 
     id: str
     title: str
     detector: str | None
     figures: tuple[Figure, ...]
+    notes: tuple[str, ...] = ()
+
+
+def _drawable(fig: Figure) -> bool:
+    """Whether any trace of ``fig`` has a finite point (y of null is a gap, not a point)."""
+    for tr in fig.spec["data"]:
+        ys = tr.get("y")
+        if ys is None:
+            continue
+        if any(y is not None and not (isinstance(y, float) and math.isnan(y)) for y in ys):
+            return True
+    return False
+
+
+def _keep_drawable(section: Section) -> Section:
+    """``section`` without its empty figures, each named in its notes (an empty plot reads as a bug)."""
+    keep = tuple(f for f in section.figures if _drawable(f))
+    if len(keep) == len(section.figures):
+        return section
+    notes = section.notes + tuple(
+        f"{f.title}: not drawn. " + (f.caption if f.id == "fig-timeline" else
+                                     "None of its signals has a finite sample in this log (the run ended, or "
+                                     "the detector was not valid, before there was one).")
+        for f in section.figures if f not in keep)
+    return Section(section.id, section.title, section.detector, keep, notes)
 
 
 def report_sections(logs: Sequence[FlightLog], labels: Sequence[str]) -> tuple[Section, ...]:
@@ -131,7 +160,7 @@ def report_sections(logs: Sequence[FlightLog], labels: Sequence[str]) -> tuple[S
     for tr in (tr for s in sections for f in s.figures for tr in f.spec["data"]):
         if tr.get("legendgroup", "run-0") != "run-0":
             tr.setdefault("opacity", 0.8)  # a later run drawn over the first lets it show where they agree
-    return tuple(sections)
+    return tuple(_keep_drawable(s) for s in sections)
 
 
 @lru_cache(maxsize=1)

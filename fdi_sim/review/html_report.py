@@ -215,6 +215,7 @@ def render_report(reviews: Sequence[RunReview], sections: Sequence[object], chan
             body.append(_episode_table(reviews, s.detector))
         for f in s.figures:
             body.extend([f"<h3>{_e(f.title)}</h3>", figure_html(f), f'<p class="caption">{_e(f.caption)}</p>'])
+        body.extend(f'<p class="none">{_e(n)}</p>' for n in getattr(s, "notes", ()))
         body.append("</section>")
 
     for s in ordered[:1]:
