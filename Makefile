@@ -14,10 +14,11 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
-demo: $(STAMP)  ## fly the headline scenario, write an MCAP, print a summary; then a fault with the FDI bank in the loop
+demo: $(STAMP)  ## fly the headline scenario, write an MCAP, print a summary; then a fault with the FDI bank in the loop, and its review (HTML report)
 	$(VENV)/bin/fdi-sim run scenarios/f16_cruise_doublets.toml --out runs/demo
 	$(VENV)/bin/fdi-sim run scenarios/f16_pitch_gyro_bias.toml --log runs/demo/f16_pitch_gyro_bias.mcap --force
 	$(VENV)/bin/fdi-sim detect runs/demo/f16_pitch_gyro_bias.mcap --bank scenario
+	$(VENV)/bin/fdi-sim review runs/demo/f16_pitch_gyro_bias.mcap  # writes runs/demo/f16_pitch_gyro_bias.review.html
 
 # node modules for tests/flightlog/test_foxglove.py (Foxglove's decoders), from the lock file
 NODE_TOOLS := tools/foxglove/node_modules/.package-lock.json
