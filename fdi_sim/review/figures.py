@@ -102,12 +102,20 @@ class Section:
 
 
 def _drawable(fig: Figure) -> bool:
-    """Whether any trace of ``fig`` has a finite point (y of null is a gap, not a point)."""
+    """Whether any trace of ``fig`` has a finite point within the time axis' range (y of null is a
+    gap, not a point; a fault window that starts after a cut-off log ends lies outside the axes)."""
+    t_range = fig.spec["layout"].get("xaxis", {}).get("range")
     for tr in fig.spec["data"]:
-        ys = tr.get("y")
+        ys, xs = tr.get("y"), tr.get("x")
         if ys is None:
             continue
-        if any(y is not None and not (isinstance(y, float) and math.isnan(y)) for y in ys):
+        pts = [x for x, y in zip(xs if xs is not None else range(len(ys)), ys)
+               if y is not None and not (isinstance(y, float) and math.isnan(y))]
+        if not pts:
+            continue
+        if t_range is None or xs is None or not all(isinstance(x, (int, float)) for x in pts):
+            return True
+        if min(pts) <= t_range[1] and max(pts) >= t_range[0]:  # a segment or a point in view
             return True
     return False
 
@@ -117,11 +125,18 @@ def _keep_drawable(section: Section) -> Section:
     keep = tuple(f for f in section.figures if _drawable(f))
     if len(keep) == len(section.figures):
         return section
-    notes = section.notes + tuple(
-        f"{f.title}: not drawn. " + (f.caption if f.id == "fig-timeline" else
-                                     "None of its signals has a finite sample in this log (the run ended, or "
-                                     "the detector was not valid, before there was one).")
-        for f in section.figures if f not in keep)
+
+    def why(f: Figure) -> str:
+        t_range = f.spec["layout"].get("xaxis", {}).get("range") or [math.nan, math.nan]
+        span = f"t = {t_range[0]:.2f} .. {t_range[1]:.2f} s"
+        if f.id == "fig-timeline":
+            return (f.caption if not f.spec["data"] else
+                    f"No fault was active and no detector alarmed within the log's time span ({span}); a fault "
+                    "scheduled later never started.")
+        return (f"None of its signals has a finite sample within the log's time span ({span}): the run ended, "
+                "or the detector was not valid, before there was one.")
+
+    notes = section.notes + tuple(f"{f.title}: not drawn. {why(f)}" for f in section.figures if f not in keep)
     return Section(section.id, section.title, section.detector, keep, notes)
 
 
@@ -392,7 +407,9 @@ def _timeline(ctx: _Context) -> Figure:
         t, y = _series(dec, op, "icing_eta")
         data.append(line(t, y, r.name("icing eta"), r.colour(5), panel=2, group=f"run-{r.index}"))
     if not data:
-        caption = "No fault was injected and no detector ran in this run: nothing to mark on the timeline."
+        caption = ("No fault was injected and no detector alarmed in this run: nothing to mark on the timeline."
+                   if ctx.detectors else
+                   "No fault was injected and no detector ran in this run: nothing to mark on the timeline.")
         return Figure("fig-timeline", "Faults, alarms and isolations", caption, {"data": data, "layout": lay})
     caption = ("Shaded bands and thick bars are the true fault intervals from the log's catalog; thin bars mark "
                "each detector's alarm, triangles its onsets, diamonds each isolation (hover for the hypothesis)"

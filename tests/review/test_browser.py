@@ -51,8 +51,10 @@ INK_BELOW = 215
 COLOUR_TOLERANCE = 40
 #: pixels within this of white in every channel are background (white, the #eeeeee grid)
 NEAR_WHITE = 20
-#: a line trace is expected on the screenshot when this many of its points lie inside its axes
-MIN_VISIBLE_POINTS = 5
+#: a line trace is expected on the screenshot when this many of its points lie inside its axes: two
+#: make a segment (the timeline's fault and alarm bars are segments of two points each; a run cut off
+#: soon after its fault onset has nothing else on its timeline)
+MIN_VISIBLE_POINTS = 2
 
 # the state of each figure after rendering: its box on the page, its subplot areas, what it drew,
 # and per line trace (plotly's resolved _fullData) its colour, opacity and points inside the axes' ranges

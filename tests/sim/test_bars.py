@@ -99,16 +99,20 @@ def test_ctrl_c_ends_the_run_cleanly(tmp_path: Path, f16_text: str, monkeypatch:
     """Ctrl-C (KeyboardInterrupt) in the middle of real JSBSim stepping: status interrupted, finished log."""
     from fdi_sim.aircraft import Aircraft
 
-    real_step = Aircraft.step
+    real_stepper = Aircraft.stepper  # the loop steps JSBSim through this callable (FGFDMExec.run)
     calls = {"n": 0}
 
-    def step_then_interrupt(self: Aircraft) -> bool:
-        calls["n"] += 1
-        if calls["n"] == 600:  # 5 s into the run
-            raise KeyboardInterrupt
-        return real_step(self)
+    def stepper_then_interrupt(self: Aircraft):
+        run_fdm = real_stepper(self)
 
-    monkeypatch.setattr(Aircraft, "step", step_then_interrupt)
+        def step() -> object:
+            calls["n"] += 1
+            if calls["n"] == 600:  # 5 s into the run
+                raise KeyboardInterrupt
+            return run_fdm()
+        return step
+
+    monkeypatch.setattr(Aircraft, "stepper", stepper_then_interrupt)
     res = run(loads(f16_text), tmp_path, progress=False)
     assert res.status == "interrupted"
     log = read_log(res.log_path)  # a complete file (summary present), not one needing repair
