@@ -93,7 +93,8 @@ _FLOWN: dict[str, Path] = {}
 
 def shipped_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The shipped scenarios flown for 8 s, the gyro bias for ``ALARMED_S`` (key ``"alarmed"``),
-    a dropout variant and a ``detect`` output log; flown once per process.
+    a dropout variant and a ``detect`` output log; flown once per test session (shared by the xdist
+    workers, ``tests/flown_once.py``).
 
     Parameters
     ----------
@@ -105,9 +106,15 @@ def shipped_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     dict of str to Path
         Scenario stem (or ``"alarmed"``, ``"dropout"``, ``"detect"``) to MCAP path.
     """
-    if _FLOWN:
-        return dict(_FLOWN)
-    out = tmp_path_factory.mktemp("foxglove")
+    if not _FLOWN:
+        from flown_once import flown_once  # tests/flown_once.py: once for the session, across xdist workers
+
+        _FLOWN.update(flown_once(tmp_path_factory, "foxglove", _fly_shipped))
+    return dict(_FLOWN)
+
+
+def _fly_shipped(out: Path) -> dict[str, Path]:
+    """The logs of :func:`shipped_logs`, flown into ``out``."""
     logs: dict[str, Path] = {}
     jobs = []
     for name in SCENARIOS:
@@ -124,8 +131,7 @@ def shipped_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
                                        "--quiet"), jobs))
     logs["detect"] = out / "detect.mcap"
     _cli("detect", str(logs["dropout"]), "--detector", DETECTOR, "--out", str(logs["detect"]))
-    _FLOWN.update(logs)
-    return dict(logs)
+    return logs
 
 
 @pytest.fixture(scope="session")

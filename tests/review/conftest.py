@@ -115,10 +115,17 @@ def _killed(folder: Path) -> Path:
 
 @pytest.fixture(scope="session")
 def review_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Name -> path of real MCAP logs (see the module docstring); flown once per session."""
+    """Name -> path of real MCAP logs (see the module docstring); flown once per session, shared by
+    the xdist workers (``tests/flown_once.py``)."""
+    from flown_once import flown_once
+
+    return flown_once(tmp_path_factory, "review_logs", _fly_review_logs)
+
+
+def _fly_review_logs(d: Path) -> dict[str, Path]:
+    """The logs of :func:`review_logs`, flown into ``d``."""
     from fdi_sim.flightlog import repair_log
 
-    d = tmp_path_factory.mktemp("review_logs")
     logs: dict[str, Path] = {}
     short = _gyro_text(30.0, **{'t_start_s = 30.0': 't_start_s = 20.0'})  # keep the rudder doublet inside 30 s
     logs["fault"] = _fly(short, d / "gyro.mcap")
