@@ -44,7 +44,7 @@ browser:
 	fi
 
 test: $(STAMP) node-tools browser  ## the default suite (under 15 min); long studies are marked slow
-	$(PY) -m pytest -q -n 2 --dist loadfile tests  # two workers (CI has 2 cores); a file stays on one worker (module fixtures)
+	$(PY) -m pytest -q -n 2 --dist loadfile --durations=15 tests  # two workers (CI has 2 cores); a file stays on one worker (module fixtures)
 
 test-slow: $(STAMP)  ## only the long studies and reproductions
 	$(PY) -m pytest -q -m slow tests
