@@ -7,6 +7,7 @@ one time axis through ``matches``; only ``scatter`` traces (WebGL fails in headl
 from __future__ import annotations
 
 import json
+import math
 import re
 from typing import Any, Sequence
 
@@ -113,7 +114,9 @@ def panel_layout(span_s: tuple[float, float], ylabels: Sequence[str], *, title: 
     gap = 0.06 if n <= 3 else 0.025
     usable = 1.0 - gap * (n - 1)
     tops = 1.0 - np.concatenate(([0.0], np.cumsum(w / w.sum() * usable + gap)[:-1]))
-    t0, t1 = span_s
+    # the axis spans the log to the millisecond the traces are rounded to, so a segment ending at the log's
+    # last sample is not cut off by its own rounding
+    t0, t1 = math.floor(span_s[0] * 1000.0) / 1000.0, math.ceil(span_s[1] * 1000.0) / 1000.0
     lay: dict[str, Any] = {"title": {"text": title, "x": 0.01, "font": {"size": 14}},
                            "height": int(90 + PANEL_PX * w.sum()), "margin": {"l": 70, "r": 70, "t": 50, "b": 45},
                            "hovermode": "closest", "showlegend": True,

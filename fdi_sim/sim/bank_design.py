@@ -448,45 +448,46 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
     Returns the record stored in the cache (thresholds, method, training samples per member).
     """
     from fdi_sim.decision.tail import confident_tail_threshold
-    from fdi_sim.sim.calibrate import fly_training, training_seeds
+    from fdi_sim.sim.calibrate import cache_lock, fly_training, training_seeds
 
     f = sc.model.fdi
     key = _thresholds_key(sc, bank, p)
     path = _cache_path(key)
-    rec = None
-    if use_cache and path.is_file():
-        try:
-            rec = json.loads(path.read_text())
-            if [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
-                rec = None
-        except (ValueError, KeyError, OSError):
-            rec = None
-    if rec is None:
-        logs = training_logs
-        if logs is None:
-            logs = fly_training(sc, training_seeds(f.calibration_flights), f.calibration_duration_s, progress=progress)
-        logs = list(logs)
-        stats: list[list[np.ndarray]] = [[] for _ in bank.members]
-        for lg in logs:
-            _replay_log(bank, lg, raw_thresholds=True)
-            for i, mem in enumerate(bank.members):
-                stats[i].append(mem.trace_statistic())
-        rec = {"p_per_sample": p, "confidence": THRESHOLD_CONFIDENCE, "members": []}
-        rng = np.random.default_rng(0)  # the bootstrap's resampling: fixed, so a calibration is reproducible
-        for mem, s in zip(bank.members, stats):
-            s = [x[np.isfinite(x)] for x in s]
-            x = np.concatenate(s)
-            thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
-            rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
-                                   "max_training": float(x.max()) if x.size else None})
-        if use_cache:
+    with cache_lock(path, use_cache):  # another process computing this entry: wait, then read it
+        rec = None
+        if use_cache and path.is_file():
             try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                tmp = path.with_suffix(f".tmp{os.getpid()}")
-                tmp.write_text(json.dumps(rec))
-                os.replace(tmp, path)
-            except OSError:
-                pass
+                rec = json.loads(path.read_text())
+                if [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
+                    rec = None
+            except (ValueError, KeyError, OSError):
+                rec = None
+        if rec is None:
+            logs = training_logs
+            if logs is None:
+                logs = fly_training(sc, training_seeds(f.calibration_flights), f.calibration_duration_s, progress=progress)
+            logs = list(logs)
+            stats: list[list[np.ndarray]] = [[] for _ in bank.members]
+            for lg in logs:
+                _replay_log(bank, lg, raw_thresholds=True)
+                for i, mem in enumerate(bank.members):
+                    stats[i].append(mem.trace_statistic())
+            rec = {"p_per_sample": p, "confidence": THRESHOLD_CONFIDENCE, "members": []}
+            rng = np.random.default_rng(0)  # the bootstrap's resampling: fixed, so a calibration is reproducible
+            for mem, s in zip(bank.members, stats):
+                s = [x[np.isfinite(x)] for x in s]
+                x = np.concatenate(s)
+                thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
+                rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
+                                       "max_training": float(x.max()) if x.size else None})
+            if use_cache:
+                try:
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    tmp = path.with_suffix(f".tmp{os.getpid()}")
+                    tmp.write_text(json.dumps(rec))
+                    os.replace(tmp, path)
+                except OSError:
+                    pass
     for mem, r in zip(bank.members, rec["members"]):
         mem.set_threshold(float(r["threshold"]))
     bank.calibration = rec

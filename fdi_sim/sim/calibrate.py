@@ -10,15 +10,17 @@ the flights, the target, the sensor suite file and the package version.
 """
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import os
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -149,6 +151,33 @@ class CachedCalibration:
     wall_s: float
 
 
+@contextmanager
+def cache_lock(path: Path, use: bool = True) -> Iterator[None]:
+    """Hold an exclusive lock on ``<path>.lock`` while the cache entry ``path`` is read or computed.
+
+    A second process that needs the same entry (the test suite's xdist workers, a study's Dask
+    workers, two runs started at once) waits for the first and then reads its entry instead of
+    flying the same training flights again. ``fcntl`` locks end with their process, so a crash
+    leaves no stale lock. Without ``use``, or where the lock file cannot be made (an unwritable
+    cache), nothing is locked.
+    """
+    fh = None
+    if use:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fh = open(path.with_suffix(".lock"), "w")
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        except OSError:
+            if fh is not None:
+                fh.close()
+            fh = None
+    try:
+        yield
+    finally:
+        if fh is not None:
+            fh.close()  # closing the file releases the lock
+
+
 def calibrated_gust_kalman(sc: Scenario, model: Any, *, rate_hz: float = 20.0, n_flights: int = DEFAULT_TRAINING_FLIGHTS,
                            duration_s: float = DEFAULT_TRAINING_S, target: float = DEFAULT_TARGET,
                            params: Mapping[str, Any] | None = None, use_cache: bool = True,
@@ -193,34 +222,35 @@ def gust_kalman_calibration(sc: Scenario, model: Any, *, rate_hz: float = 20.0,
     det = make_gust_kalman(model, rate_hz=rate_hz, sim_rate_hz=sc.model.rate_hz, **params)
     key = calibration_key(sc, det.design, params, rate_hz, n_flights, duration_s, target)
     path = cache_dir() / f"{key}.json"
-    cal = None
-    if use_cache and path.is_file():
-        try:
-            cal = Calibration.from_dict(json.loads(path.read_text()))
-        except (ValueError, KeyError, OSError):
-            cal = None  # a damaged cache entry is recomputed
-    cached = cal is not None and cal.sigma_m.shape == (det.design.model.n_outputs,) * 2
-    if not cached:
-        seeds = training_seeds(n_flights)
-        if training_logs is not None:
-            logs = list(training_logs)
-            flown = [float(lg.topics["/truth/state"].t_s[-1]) for lg in logs]
-            if len(logs) != n_flights or any(abs(f - duration_s) > 0.5 for f in flown):
-                raise DesignError(f"training_logs: {len(logs)} flights of {min(flown):g}-{max(flown):g} s given for "
-                                  f"n_flights={n_flights} x duration_s={duration_s:g}")
-        else:
-            logs = fly_training(sc, seeds, duration_s, progress=progress, label=progress_label)
-        flights = [log_samples(lg, det.design.model, rate_hz) for lg in logs]
-        labels = [f"seed {s}, {duration_s:g} s, {sc.model.atmosphere.turbulence} turbulence, faults removed" for s in seeds]
-        cal = calibrate(det.design, flights, target, labels)
-        if use_cache:
+    with cache_lock(path, use_cache):  # another process computing this entry: wait, then read it
+        cal = None
+        if use_cache and path.is_file():
             try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                tmp = path.with_suffix(f".tmp{os.getpid()}")
-                tmp.write_text(json.dumps(cal.to_dict()))
-                os.replace(tmp, path)  # committed by rename: a crash leaves no half-written entry
-            except OSError:
-                pass  # an unwritable cache only costs the next call the flights again
+                cal = Calibration.from_dict(json.loads(path.read_text()))
+            except (ValueError, KeyError, OSError):
+                cal = None  # a damaged cache entry is recomputed
+        cached = cal is not None and cal.sigma_m.shape == (det.design.model.n_outputs,) * 2
+        if not cached:
+            seeds = training_seeds(n_flights)
+            if training_logs is not None:
+                logs = list(training_logs)
+                flown = [float(lg.topics["/truth/state"].t_s[-1]) for lg in logs]
+                if len(logs) != n_flights or any(abs(f - duration_s) > 0.5 for f in flown):
+                    raise DesignError(f"training_logs: {len(logs)} flights of {min(flown):g}-{max(flown):g} s given for "
+                                      f"n_flights={n_flights} x duration_s={duration_s:g}")
+            else:
+                logs = fly_training(sc, seeds, duration_s, progress=progress, label=progress_label)
+            flights = [log_samples(lg, det.design.model, rate_hz) for lg in logs]
+            labels = [f"seed {s}, {duration_s:g} s, {sc.model.atmosphere.turbulence} turbulence, faults removed" for s in seeds]
+            cal = calibrate(det.design, flights, target, labels)
+            if use_cache:
+                try:
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    tmp = path.with_suffix(f".tmp{os.getpid()}")
+                    tmp.write_text(json.dumps(cal.to_dict()))
+                    os.replace(tmp, path)  # committed by rename: a crash leaves no half-written entry
+                except OSError:
+                    pass  # an unwritable cache only costs the next call the flights again
     assert cal is not None
     detector = GustKalmanDetector(det.design, cal, min_cosine=det.min_cosine, use_analytic_threshold=det.use_analytic)
     return CachedCalibration(detector, key, path, cached, time.perf_counter() - t0)
