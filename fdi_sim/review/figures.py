@@ -352,7 +352,8 @@ def _timeline(ctx: _Context) -> Figure:
     for r in ctx.runs:
         g = f"run-{r.index}"
         faults = [(r.name(f"fault {f.get('label', '?')}"),
-                   [(float(a), min(float(b), r.log.end_t_s)) for a, b in f.get("windows_s", [])]) for f in r.catalog()]
+                   [(float(a), min(float(b), r.log.end_t_s)) for a, b in f.get("windows_s", [])
+                    if float(a) <= r.log.end_t_s]) for f in r.catalog()]  # a window after a cut-off log never began
         alarm_rows, onset_x, onset_y, onset_txt, iso_x, iso_y, iso_txt = [], [], [], [], [], [], []
         for det in r.detectors():
             st = r.statistic(det)
@@ -407,8 +408,12 @@ def _timeline(ctx: _Context) -> Figure:
         t, y = _series(dec, op, "icing_eta")
         data.append(line(t, y, r.name("icing eta"), r.colour(5), panel=2, group=f"run-{r.index}"))
     if not data:
-        caption = ("No fault was injected and no detector alarmed in this run: nothing to mark on the timeline."
-                   if ctx.detectors else
+        later = [f"{f.get('label', '?')} from {float(f['windows_s'][0][0]):.2f} s" for r in ctx.runs
+                 for f in r.catalog() if f.get("windows_s")]  # every window began after the log's end
+        caption = ((f"No fault started and no detector alarmed before the log ends: {', '.join(later)} was "
+                    "scheduled after it." if later else
+                    "No fault was injected and no detector alarmed in this run: nothing to mark on the timeline.")
+                   if ctx.detectors or later else
                    "No fault was injected and no detector ran in this run: nothing to mark on the timeline.")
         return Figure("fig-timeline", "Faults, alarms and isolations", caption, {"data": data, "layout": lay})
     caption = ("Shaded bands and thick bars are the true fault intervals from the log's catalog; thin bars mark "

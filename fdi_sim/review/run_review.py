@@ -225,6 +225,10 @@ class RunReview:
         if self.faults:
             for f in self.faults:
                 d = self.first_detection(f.label)
+                if d is None and f.windows_s and all(a > self.t_end_s for a, _ in f.windows_s):
+                    rows.append((f"fault {f.label}", f"never started: scheduled from {f.windows_s[0][0]:.2f} s, after "
+                                 f"the log ends at {self.t_end_s:.2f} s"))
+                    continue
                 if d is None:
                     rows.append((f"fault {f.label}", f"NOT detected (true interval {windows_text(f.windows_s, self.t_end_s)})"))
                     continue
