@@ -52,8 +52,6 @@ CONFIG: dict[str, Any] = {"displaylogo": False, "responsive": True}
 ZOOM_POINTS: int = 3000
 """Most samples a trace keeps at full resolution around onsets (fault onsets come first): 25 s of
 a 120 Hz signal, 150 s of a 20 Hz detector statistic."""
-ISOLATION_WINDOW_S: float = 1.0
-"""The isolation reported for a detection: the most frequent hypothesis this long after it [s]."""
 MAX_SWITCH_LINES: int = 200
 TOPIC_RECONFIGURATION = "/fdi/reconfiguration"
 
@@ -438,31 +436,26 @@ class _Detection:
 
 
 def _detection(r: _Run, det: str, st: VectorTopic) -> list[_Detection]:
-    """One per injected fault: first alarm at or after onset, delay, isolation (right/wrong)."""
+    """One per injected fault: first alarm at or after onset, delay, isolation (right/wrong), by the
+    rule of the run summary and the review (:func:`fdi_sim.sim.detect.fault_outcome`)."""
+    from fdi_sim.sim.detect import fault_outcome
+
     a = st["alarm"] > 0.5
     iso = st["isolation"] if "isolation" in st.fields else np.full(len(st), -1.0)
     hyp = r.hypotheses(det)
+    names = [None if k < 0 else _hyp_name(hyp, int(k)) for k in iso.tolist()]
     out = []
     for f in r.catalog():
         if not f.get("windows_s"):
             continue
-        t_on = float(f["windows_s"][0][0])
-        idx = np.flatnonzero(a & (st.t_s >= t_on))
-        lab = f.get("label", "?")
-        if not idx.size:
-            out.append(_Detection(f"{r.name(lab)}: not detected", None, None))
+        o = fault_outcome({"label": f.get("label", "?"), **f}, st.t_s, a, names)
+        lab = r.name(o.label)
+        if o.first_alarm_s is None:
+            out.append(_Detection(f"{lab}: not detected", None, None))
             continue
-        t1 = float(st.t_s[idx[0]])
-        near = iso[idx[st.t_s[idx] < t1 + ISOLATION_WINDOW_S]]
-        named = [int(k) for k in near.tolist() if k >= 0]
-        k = max(named, key=named.count) if named else -1  # ties: the first named (max keeps the first)
-        name = _hyp_name(hyp, k)
-        target = str(f.get("target", ""))
-        mark = ""
-        if k >= 0 and target not in ("", "airframe"):
-            mark = " (right)" if name == target or name.startswith(target + "_") else " (wrong)"
-        out.append(_Detection(f"{r.name(lab)}: detected at {t1:.2f} s, delay {t1 - t_on:.2f} s, isolated as "
-                              f"{name}{mark}", t1, t1 - t_on))
+        mark = "" if o.isolation_correct is None else (" (right)" if o.isolation_correct else " (wrong)")
+        out.append(_Detection(f"{lab}: detected at {o.first_alarm_s:.2f} s, delay {o.delay_s:.2f} s, isolated as "
+                              f"{o.isolated_as or 'not isolated'}{mark}", o.first_alarm_s, o.delay_s))
     return out
 
 

@@ -76,10 +76,8 @@ def _folded(summary: str, n_rows: int, table: str) -> str:
 
 def _detection_cell(r: RunReview, fault: str) -> str:
     d = r.first_detection(fault)
-    f = next((x for x in r.faults if x.label == fault), None)
-    if d is None and f is not None and f.windows_s and all(a > r.t_end_s for a, _ in f.windows_s):
-        return (f"never started: scheduled from {f.windows_s[0][0]:.2f} s, after the log ends at "
-                f"{r.t_end_s:.2f} s")
+    if d is None and r.never_started(fault):
+        return _e(r.never_started(fault))
     if d is None:
         return '<span class="bad">not detected</span>'
     iso = "" if d.isolation_correct is None else (' <span class="ok">right</span>' if d.isolation_correct

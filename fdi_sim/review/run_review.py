@@ -216,6 +216,14 @@ class RunReview:
                 if d.detected_t_s is not None and (fault is None or d.fault == fault)]
         return min(hits, key=lambda d: d.detected_t_s) if hits else None
 
+    def never_started(self, fault: str) -> str | None:
+        """Why ``fault`` cannot have been detected, when every window of it began after the log ends
+        (a cut-off run); None otherwise."""
+        f = next((x for x in self.faults if x.label == fault), None)
+        if f is None or not f.windows_s or any(a <= self.t_end_s for a, _ in f.windows_s):
+            return None
+        return f"never started: scheduled from {f.windows_s[0][0]:.2f} s, after the log ends at {self.t_end_s:.2f} s"
+
     def headline(self) -> list[tuple[str, str]]:
         """The numbers a reviewer asks first, as (label, value) rows."""
         rows = [("run", f"{self.scenario} ({self.aircraft}, seed {self.seed})"), ("ended", self.ending)]
@@ -225,9 +233,8 @@ class RunReview:
         if self.faults:
             for f in self.faults:
                 d = self.first_detection(f.label)
-                if d is None and f.windows_s and all(a > self.t_end_s for a, _ in f.windows_s):
-                    rows.append((f"fault {f.label}", f"never started: scheduled from {f.windows_s[0][0]:.2f} s, after "
-                                 f"the log ends at {self.t_end_s:.2f} s"))
+                if d is None and self.never_started(f.label):
+                    rows.append((f"fault {f.label}", self.never_started(f.label)))
                     continue
                 if d is None:
                     rows.append((f"fault {f.label}", f"NOT detected (true interval {windows_text(f.windows_s, self.t_end_s)})"))

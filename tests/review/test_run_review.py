@@ -241,3 +241,28 @@ def test_cli_open_hands_a_file_url_to_the_browser(review_logs: dict[str, Path], 
     while time.time() < deadline and not (got.exists() and got.stat().st_size):
         time.sleep(0.05)
     assert got.read_text() == out.resolve().as_uri() and os.path.isfile(out)
+
+
+def test_a_log_cut_before_its_fault_began_says_the_fault_never_started(review_logs: dict[str, Path],
+                                                                        tmp_path: Path) -> None:
+    """A deterministic cut (the SIGKILL fixture's time depends on load): the first fifth of the bank
+    fault run's bytes, repaired, ends before the 10 s onset. The headline says the fault never
+    started (not "NOT detected"), and the timeline draws no fault bar outside the log."""
+    from fdi_sim.flightlog import repair_log
+    from fdi_sim.review.figures import report_sections
+
+    src = review_logs["fault"].read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(src[: len(src) // 5])
+    fixed = tmp_path / "cut.repaired.mcap"
+    repair_log(cut, fixed)
+    r = review_log(fixed)
+    assert 2.0 < r.t_end_s < 10.0, r.t_end_s
+    rows = dict(r.headline())
+    assert rows["fault q_radps_bias"] == (f"never started: scheduled from 10.00 s, after the log ends at "
+                                          f"{r.t_end_s:.2f} s")
+    for s in report_sections([read_log(fixed)], [""]):
+        for f in s.figures:
+            for tr in f.spec["data"]:
+                xs = [x for x in tr.get("x") or [] if isinstance(x, (int, float))]
+                assert not xs or max(xs) <= r.t_end_s + 1e-3, (f.id, tr.get("name"), max(xs))
