@@ -9,12 +9,15 @@ Designs: ``kalman-gust-v1`` at the schedule points the flight crosses
 (:func:`fdi_sim.sim.designs.schedule_points`, gain-scheduled when there is more than one and
 ``schedule = "auto"``), each calibrated (``Sigma_m``) on fault-free training flights; the
 kinematic checks from their catalogue. Thresholds: the bank's design false-alarm rate
-``far_per_h`` is split evenly over its detectors and over the samples of an hour (a union bound:
-an alarm onset needs an exceedance), ``p = far_per_h / (detectors x rate_hz x 3600)`` per
-sample, and each detector's threshold is the ``1 - p`` quantile of its statistic on the training
-flights, extrapolated by a generalized Pareto tail where the flights hold fewer than ten
-exceedances of it (:func:`fdi_sim.decision.tail.tail_threshold`), taken at its 95 % bootstrap bound
-over the training flights (:func:`fdi_sim.decision.tail.confident_tail_threshold`).
+``far_per_h`` is split evenly over its detectors (a union bound), and each detector's threshold is
+the level whose alarm episodes come ``far_per_h / detectors`` times per flight hour on the
+fault-free training flights: the k-of-n decision applied exactly
+(:func:`fdi_sim.decision.tail.persistence_series`), the episodes' peaks fitted by a generalized
+Pareto (or exponential) tail and extrapolated (:func:`fdi_sim.decision.tail.episode_threshold`),
+taken at its 95 % bootstrap bound over the training flights
+(:func:`fdi_sim.decision.tail.confident_episode_threshold`). The angle-magnitude rule, whose
+exceedance also needs a fault direction, keeps the per-sample quantile
+``p = far_per_h / (detectors x rate_hz x 3600)`` (:func:`fdi_sim.decision.tail.confident_tail_threshold`).
 """
 from __future__ import annotations
 
@@ -435,7 +438,7 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
         else:
             h.update(repr(getattr(st, "design", getattr(st, "det", ""))).encode())
     blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "confidence": THRESHOLD_CONFIDENCE, "n": f.calibration_flights, "T": f.calibration_duration_s,
-                       "decision": [f.persistence_k, f.persistence_n], "version": __version__, "members": h.hexdigest()},
+                       "decision": [f.persistence_k, f.persistence_n], "method": "episodes-v4", "version": __version__, "members": h.hexdigest()},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
@@ -447,7 +450,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
 
     Returns the record stored in the cache (thresholds, method, training samples per member).
     """
-    from fdi_sim.decision.tail import confident_tail_threshold
+    from fdi_sim.decision.tail import confident_episode_threshold, confident_tail_threshold, persistence_series
     from fdi_sim.sim.calibrate import cache_lock, fly_training, training_seeds
 
     f = sc.model.fdi
@@ -467,17 +470,36 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
             if logs is None:
                 logs = fly_training(sc, training_seeds(f.calibration_flights), f.calibration_duration_s, progress=progress)
             logs = list(logs)
+            d = bank.decision
+            episodes = d.rule == "persistence"  # the angle rule's exceedance also needs a direction
             stats: list[list[np.ndarray]] = [[] for _ in bank.members]
+            series: list[list[np.ndarray]] = [[] for _ in bank.members]
+            hours: list[list[float]] = [[] for _ in bank.members]
             for lg in logs:
                 _replay_log(bank, lg, raw_thresholds=True)
                 for i, mem in enumerate(bank.members):
                     stats[i].append(mem.trace_statistic())
-            rec = {"p_per_sample": p, "confidence": THRESHOLD_CONFIDENCE, "members": []}
+                    if episodes:
+                        st = np.concatenate(mem.trace["statistic"]) if mem.trace["statistic"] else np.zeros(0)
+                        ok = np.concatenate(mem.trace["valid"]) if mem.trace["valid"] else np.zeros(0, bool)
+                        series[i].append(persistence_series(st, ok, d.k, d.n))
+                        hours[i].append(float(ok.sum()) / (float(f.rate_hz) * S_PER_H))
+            rate = float(f.far_per_h) / max(1, len(bank.members))
+            rec = {"p_per_sample": p, "episodes_per_h": rate if episodes else None,
+                   "confidence": THRESHOLD_CONFIDENCE, "members": []}
             rng = np.random.default_rng(0)  # the bootstrap's resampling: fixed, so a calibration is reproducible
-            for mem, s in zip(bank.members, stats):
+            for i, (mem, s) in enumerate(zip(bank.members, stats)):
                 s = [x[np.isfinite(x)] for x in s]
                 x = np.concatenate(s)
-                thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
+                if episodes:
+                    try:
+                        thr, method = confident_episode_threshold(series[i], rate, hours[i], rng,
+                                                                  level=THRESHOLD_CONFIDENCE)
+                    except DesignError as e:  # short training flights: too few episodes to fit
+                        thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
+                        method = f"per-sample ({e}): {method}"
+                else:
+                    thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
                 rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
                                        "max_training": float(x.max()) if x.size else None})
             if use_cache:

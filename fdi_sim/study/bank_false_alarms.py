@@ -2,7 +2,7 @@
 
 Per aircraft, at the cruise, climb and approach points of the shipped scenarios
 (:data:`POINTS`): each scenario with its faults removed, in moderate turbulence, flown for
-``duration_s`` (10 minutes) with held-out seeds (201-208; the bank's training flights use seeds
+``duration_s`` (10 minutes) with held-out seeds (301-308; the bank's training flights use seeds
 1e6 + i), the default bank in the loop, FDI topics only (``[log] per_step = false``). Every alarm
 episode is a false alarm. The rate per flight hour is given with its exact Poisson interval
 (Garwood) beside the bank's design rate ``far_per_h``.
@@ -32,10 +32,12 @@ POINTS: dict[str, tuple[str, ...]] = {
     "DHC6": ("dhc6_cruise_doublets", "dhc6_climb", "dhc6_approach_flaps"),
 }
 #: seeds 101-108 were looked at while the threshold method was chosen (the DHC-6 airspeed check's
-#: point-estimate threshold alarmed 3 times on them, which led to the bootstrap bound); the bar is
-#: reported on 201-208, which no design decision saw
-DEVELOPMENT_SEEDS = tuple(range(101, 109))
-HELD_OUT_SEEDS = tuple(range(201, 209))
+#: point-estimate threshold alarmed 3 times on them, which led to the bootstrap bound); seeds
+#: 201-208 were the report until the alarm of seed 204 (DHC-6 approach) was traced to the
+#: per-sample tail fit, which led to the episode-rate thresholds; the bar is now reported on
+#: 301-308, which no design decision saw
+DEVELOPMENT_SEEDS = tuple(range(101, 109)) + tuple(range(201, 209))
+HELD_OUT_SEEDS = tuple(range(301, 309))
 
 
 @dataclass(frozen=True)
