@@ -34,7 +34,7 @@ from fdi_sim.sim.bank import LATE_GRACE_S
 from fdi_sim.sim.calibrate import HeldRate, StudyMemberThreshold, StudyThresholds
 from fdi_sim.study.rescore import (SCALE_NUDGE, _outside, _runs, exceedances, persistence, persistence_level,
                                    rescore)
-from fdi_sim.study.stats import BANK, exposure_s
+from fdi_sim.study.stats import BANK, exposure_s, overdispersed_rate
 from fdi_sim.units import S_PER_H
 
 __all__ = ["Calibration", "CALIBRATION_METHOD", "calibrate_threshold", "CalibrationCheck", "check_calibration",
@@ -176,10 +176,15 @@ class CalibrationCheck:
     far_per_h : float
         [1/h].
     far_per_h_ci : tuple of float
-        Exact Poisson interval [1/h].
+        Exact Poisson interval [1/h], scaled by the held-out runs' dispersion where their false
+        alarms cluster by run (:func:`fdi_sim.study.stats.overdispersed_rate`).
     target_inside : bool
         The target lies in the held-out interval.
     confidence : float
+    dispersion : float or None
+        Quasi-Poisson dispersion of the held-out per-run counts (1: Poisson; None: no alarm).
+    far_per_h_ci_poisson : tuple of float
+        The plain exact Poisson interval [1/h] (independent events).
     """
 
     calibration: Calibration
@@ -191,6 +196,8 @@ class CalibrationCheck:
     far_per_h_ci: tuple[float, float]
     target_inside: bool
     confidence: float
+    dispersion: float | None = None
+    far_per_h_ci_poisson: tuple[float, float] | None = None
 
 
 def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path, detector: str,
@@ -198,7 +205,8 @@ def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path,
                       k: int | None = None, n: int | None = None, grace_s: float = LATE_GRACE_S
                       ) -> CalibrationCheck:
     """Calibrate on the runs of even index (``split = "even"``; ``"odd"``: the other way) and
-    give the other half's false-alarm rate at that scale with its exact Poisson interval.
+    give the other half's false-alarm rate at that scale with its exact Poisson interval, scaled by
+    the held-out runs' dispersion (quasi-Poisson) where their alarms cluster by run.
 
     The held-out count is re-scored by the direct rule (:func:`rescore`), not by the
     calibration's own sweep, so the two halves share nothing but the scale.
@@ -215,9 +223,21 @@ def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path,
         raise StudyError(str(out_dir), detector, f"no held-out ({'odd' if par == 0 else 'even'}) completed run "
                          f"with a log has {detector!r}", "fly more runs")
     c = int(d.false_alarms[0])
-    lo, hi = poisson_rate_interval(c, d.exposure_h, confidence)
-    return CalibrationCheck(cal, split, d.runs, c, d.exposure_h, c / d.exposure_h, (lo, hi),
-                            bool(lo <= target_per_h <= hi), confidence)
+    # per held-out run: a run's sampled turbulence, wind and biases make its false alarms cluster
+    # (measured on the DHC-6 attitude check: one run holds several), so the interval is the
+    # dispersion-scaled Garwood one (quasi-Poisson), which the plain interval equals when phi <= 1
+    counts, expos = [], []
+    for r in held:
+        dr = rescore([r], out_dir, [cal.scale], k=k, n=n, grace_s=grace_s).detectors.get(detector)
+        if dr is not None and dr.exposure_h > 0:
+            counts.append(int(dr.false_alarms[0]))
+            expos.append(dr.exposure_h)
+    assert sum(counts) == c, (sum(counts), c)  # the same rule run by run
+    _, ci, phi = overdispersed_rate(counts, expos, confidence)
+    lo, hi = ci if ci is not None else (math.nan, math.nan)
+    plain = poisson_rate_interval(c, d.exposure_h, confidence)
+    return CalibrationCheck(cal, split, d.runs, c, d.exposure_h, c / d.exposure_h, (float(lo), float(hi)),
+                            bool(lo <= target_per_h <= hi), confidence, phi, (float(plain[0]), float(plain[1])))
 
 
 # --- the thresholds file of a study ------------------------------------------------------------------

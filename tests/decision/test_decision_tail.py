@@ -125,7 +125,7 @@ def test_episode_threshold_holds_on_held_out_flights():
     """Calibrated on 24 x 300 s AR(1) flights (2 h) to 2 episodes per hour (4 expected in them:
     extrapolated), the held-out episode rate over 1,200 fresh flights (100 h): the point estimate
     within a factor of 2.5 of the target, the 95 % bootstrap bound at or below it (three
-    calibrations; measured 2.2, 3.4, 2.1 and 0.55, 1.0, 0.76 per h)."""
+    calibrations; measured 2.2, 4.3, 2.2 and 0.55, 1.7, 1.5 per h)."""
     from fdi_sim.decision.intervals import poisson_rate_interval
     from fdi_sim.decision.tail import _upcrossings, confident_episode_threshold, episode_threshold
 

@@ -24,6 +24,7 @@ vc_kts = 124.0
 turbulence = "moderate"
 [fdi]
 bank = "default"
+far_per_h = 0.9  # the largest allowed: alarms for the re-scoring checks to compare on six 60 s flights
 calibration_flights = 4
 calibration_duration_s = 60.0
 log_residuals = false

@@ -74,7 +74,7 @@ def test_report_of_real_runs(study, tmp_path):
     headline = text[head:text.index("</div>", head)]
     b = summary["bank"]
     assert P._f(b["far_per_h"]) in headline and P._ci(b["far_per_h_ci"]) in headline
-    assert f"{b['false_alarms']}</b>" in headline and "design 0.1 /h" in headline
+    assert f"{b['false_alarms']}</b>" in headline and "design 0.9 /h" in headline  # tests/study BASE far_per_h
     assert P._f(b["delay_s_median"]) in headline
     # the comparison table: a row per member and the bank, each with its rate and its prediction
     table = text[text.index("Detectors on identical runs"):text.index("Per fault type")]

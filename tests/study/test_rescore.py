@@ -128,7 +128,7 @@ def test_replay_at_the_logged_threshold_is_exact(study):
     free = [r for r in records if not r["faults"]]
     faulty = [r for r in records if r["faults"]]
     # the check has something to check: alarms on both kinds of flight, and a reconfigured flight
-    assert sum(len(r["alarms"]) for r in free) >= 2 and sum(len(r["alarms"]) for r in faulty) >= 5
+    assert sum(len(r["alarms"]) for r in free) >= 1 and sum(len(r["alarms"]) for r in faulty) >= 5
     assert any(r["reconfigurations"] for r in faulty)
     assert R.check_replay(records, out) == []
 
