@@ -114,9 +114,15 @@ def confident_tail_threshold(flights: Sequence[NDArray[np.float64]], p: float, r
     point, how = tail_threshold(np.concatenate(flights), p)
     k = len(flights)
     boot = [tail_threshold(np.concatenate([flights[i] for i in rng.integers(0, k, k)]), p)[0] for _ in range(n_boot)]
+    return _bound(point, how, boot, level, k)
+
+
+def _bound(point: float, how: str, boot: Sequence[float], level: float, k: int) -> tuple[float, str]:
+    """The ``level`` quantile of the bootstrap thresholds ``boot`` (never below the point estimate)
+    and its method text."""
     thr = float(np.quantile(boot, level))
-    return max(thr, point), (f"{level:.0%} bootstrap bound over {k} flights ({n_boot} resamples) of: {how}; point "
-                             f"estimate {point:.4g}")
+    return max(thr, point), (f"{level:.0%} bootstrap bound over {k} flights ({len(boot)} resamples) of: {how}; "
+                             f"point estimate {point:.4g}")
 
 
 # --- alarm episodes per hour (declustered peaks over threshold) -------------------------------------
@@ -188,11 +194,6 @@ def _count(cs: Sequence[_Crossings], w: NDArray[np.int64], x: float) -> int:
     return int(sum(int(wi) * c.count(x) for c, wi in zip(cs, w) if wi))
 
 
-def _upcrossings(flights: Sequence[NDArray[np.float64]], x: float) -> int:
-    """Alarm episodes of the series ``flights`` at level ``x`` (upcrossings)."""
-    return sum(_runs(m, x)[1] for m in flights)
-
-
 def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hours: float,
                       weights: NDArray[np.int64] | None = None) -> tuple[float, str]:
     """The level whose upcrossings (alarm episodes) occur ``rate_per_h`` times per flight hour.
@@ -217,8 +218,8 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
     exponential exceeds the chi-square(1) 95 % point (the gust filter's, xi 0.4-0.7, is: its
     residual mismatch in turbulence is heavy-tailed). The fit is made on the statistic or on its
     square, whichever has the fitted shape nearer 0 (a Gaussian mean's upcrossings fall as
-    ``exp(-x^2 / 2 s^2)``, Rice's formula: exponential in ``x^2``). An episode at a higher level can split into several
-    upcrossings (a statistic that chatters about the threshold); the rate is scaled by the largest
+    ``exp(-x^2 / 2 s^2)``, Rice's formula: exponential in ``x^2``). An episode at a higher level
+    can split into several upcrossings (a statistic that chatters about the threshold); the rate is scaled by the largest
     ratio of upcrossings to peaks at the levels of the 10th, 20th, ... largest peak (1 when none
     split).
 
@@ -242,18 +243,18 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
     DesignError
         A non-positive target or too few episodes for a fit.
     """
-    return _episode_fit(flights, rate_per_h, hours, weights)[:2]
+    cs = [_Crossings(m) for m in flights]
+    w = np.ones(len(cs), dtype=np.int64) if weights is None else np.asarray(weights, dtype=np.int64)
+    return _episode_fit(cs, w, rate_per_h, hours)[:2]
 
 
-def _episode_fit(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hours: float,
-                 weights: NDArray[np.int64] | None = None, _crossings: Sequence[_Crossings] | None = None,
+def _episode_fit(cs: Sequence[_Crossings], w: NDArray[np.int64], rate_per_h: float, hours: float,
                  power: float | None = None, heavy: bool | None = None) -> tuple[float, str, float, bool]:
-    """:func:`episode_threshold`, and the scale (``power``) and tail (``heavy``) it chose, which
-    a bootstrap resample is given so that it varies the fit, not the model."""
+    """:func:`episode_threshold` on the flights ``cs`` counted ``w`` times each, and the scale
+    (``power``) and tail (``heavy``) it chose, which a bootstrap resample is given so that it
+    varies the fit, not the model."""
     if not (rate_per_h > 0.0 and math.isfinite(rate_per_h)):
         raise DesignError(f"episode rate target must be > 0 per flight hour, got {rate_per_h}")
-    cs = list(_crossings) if _crossings is not None else [_Crossings(m) for m in flights]
-    w = np.ones(len(cs), dtype=np.int64) if weights is None else np.asarray(weights, dtype=np.int64)
     n_fin = sum(int(wi) * c.finite.size for c, wi in zip(cs, w))
     if n_fin < 2 * TAIL_EPISODES or hours <= 0.0:
         raise DesignError(f"{n_fin} valid training samples are too few for an episode-rate threshold; fly more "
@@ -263,10 +264,11 @@ def _episode_fit(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hour
     used = [c for c, wi in zip(cs, w) if wi]
     lo = float(np.median(np.concatenate([c.finite for c in used])))
     hi = max(c.top for c in used)
-    if _count(cs, w, lo) < MIN_EPISODES:
-        raise DesignError(f"only {_count(cs, w, lo)} alarm episodes above the median of the training statistic (a "
+    at_median = _count(cs, w, lo)
+    if at_median < MIN_EPISODES:
+        raise DesignError(f"only {at_median} alarm episodes above the median of the training statistic (a "
                           f"fit needs {MIN_EPISODES}); fly more or longer calibration flights")
-    for _ in range(50 if _count(cs, w, lo) > TAIL_EPISODES else 0):  # else: fit above the median
+    for _ in range(50 if at_median > TAIL_EPISODES else 0):  # else: fit above the median
         mid = 0.5 * (lo + hi)
         if _count(cs, w, mid) >= TAIL_EPISODES:
             lo = mid
@@ -293,16 +295,18 @@ def _episode_fit(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hour
         fits[pw] = (0.0, float(z.mean()), z) if heavy is False else genpareto.fit(z, floc=0.0)[::2] + (z,)
     pw = min(fits, key=lambda q: abs(fits[q][0]))  # the scale on which the tail is nearest exponential
     xi, sigma, z = fits[pw]
-    # exponential (xi = 0) unless the fitted heavier tail is significant: deviance of the nested
-    # models against chi-square(1) at 5 % (Coles 2001, sec. 2.6.6 and 3.4.2, the Gumbel check)
-    deviance = 2.0 * (float(np.sum(genpareto.logpdf(z, xi, loc=0.0, scale=sigma)))
-                      - float(np.sum(genpareto.logpdf(z, 0.0, loc=0.0, scale=float(z.mean())))))
-    if heavy is None:
-        heavy = xi > 0.0 and deviance > HEAVY_DEVIANCE
-    how = f"xi {xi:.3f}, deviance {deviance:.2f}"
+    how = "xi 0 (given)"
+    if heavy is not False:
+        # exponential (xi = 0) unless the fitted heavier tail is significant: deviance of the nested
+        # models against chi-square(1) at 5 % (Coles 2001, sec. 2.6.6 and 3.4.2, the Gumbel check)
+        deviance = 2.0 * (float(np.sum(genpareto.logpdf(z, xi, loc=0.0, scale=sigma)))
+                          - float(np.sum(genpareto.logpdf(z, 0.0, loc=0.0, scale=float(z.mean())))))
+        if heavy is None:
+            heavy = xi > 0.0 and deviance > HEAVY_DEVIANCE
+        how = (f"xi {xi:.3f}, deviance {deviance:.2f}" if heavy and xi > 0.0 else
+               f"xi 0 (MLE {xi:.3f}, deviance {deviance:.2f})")
     if not heavy or xi < 0.0:
         xi, sigma = 0.0, float(z.mean())
-        how = f"xi 0 (MLE {how[3:]})"
     lam = peaks.size * split / hours
     thr = u if rate_per_h >= lam else \
         (u ** pw + float(genpareto.ppf(1.0 - rate_per_h / lam, xi, loc=0.0, scale=sigma))) ** (1.0 / pw)
@@ -342,19 +346,16 @@ def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per
     h = np.array([float(hours[i]) for i in keep])
     if len(cs) < 2:
         raise DesignError("a confident threshold needs at least two training flights")
-    point, how, power, heavy = _episode_fit([], rate_per_h, float(h.sum()), _crossings=cs)
     k = len(cs)
+    point, how, power, heavy = _episode_fit(cs, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()))
     boot = []
     for _ in range(n_boot):
         w = np.bincount(rng.integers(0, k, k), minlength=k)
         try:
-            boot.append(_episode_fit([], rate_per_h, float(w @ h), weights=w, _crossings=cs, power=power,
-                                     heavy=heavy)[0])
+            boot.append(_episode_fit(cs, w, rate_per_h, float(w @ h), power=power, heavy=heavy)[0])
         except DesignError:
             continue  # a resample with too few episodes says nothing about the bound
     if len(boot) < n_boot // 2:
         raise DesignError(f"only {len(boot)} of {n_boot} bootstrap resamples could be fitted; fly more or longer "
                           "calibration flights")
-    thr = float(np.quantile(boot, level))
-    return max(thr, point), (f"{level:.0%} bootstrap bound over {k} flights ({len(boot)} resamples) of: {how}; point "
-                             f"estimate {point:.4g}")
+    return _bound(point, how, boot, level, k)

@@ -408,11 +408,13 @@ def _timeline(ctx: _Context) -> Figure:
     if not data:
         later = [f"{f.get('label', '?')} from {float(f['windows_s'][0][0]):.2f} s" for r in ctx.runs
                  for f in r.catalog() if f.get("windows_s")]  # every window began after the log's end
-        caption = ((f"No fault started and no detector alarmed before the log ends: {', '.join(later)} was "
-                    "scheduled after it." if later else
-                    "No fault was injected and no detector alarmed in this run: nothing to mark on the timeline.")
-                   if ctx.detectors or later else
-                   "No fault was injected and no detector ran in this run: nothing to mark on the timeline.")
+        if later:
+            caption = (f"No fault started and no detector alarmed before the log ends: {', '.join(later)} was "
+                       "scheduled after it.")
+        elif ctx.detectors:
+            caption = "No fault was injected and no detector alarmed in this run: nothing to mark on the timeline."
+        else:
+            caption = "No fault was injected and no detector ran in this run: nothing to mark on the timeline."
         return Figure("fig-timeline", "Faults, alarms and isolations", caption, {"data": data, "layout": lay})
     caption = ("Shaded bands and thick bars are the true fault intervals from the log's catalog; thin bars mark "
                "each detector's alarm, triangles its onsets, diamonds each isolation (hover for the hypothesis)"

@@ -76,8 +76,8 @@ def _folded(summary: str, n_rows: int, table: str) -> str:
 
 def _detection_cell(r: RunReview, fault: str) -> str:
     d = r.first_detection(fault)
-    if d is None and r.never_started(fault):
-        return _e(r.never_started(fault))
+    if d is None and (why := r.never_started(fault)):
+        return _e(why)
     if d is None:
         return '<span class="bad">not detected</span>'
     iso = "" if d.isolation_correct is None else (' <span class="ok">right</span>' if d.isolation_correct

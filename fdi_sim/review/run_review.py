@@ -233,8 +233,8 @@ class RunReview:
         if self.faults:
             for f in self.faults:
                 d = self.first_detection(f.label)
-                if d is None and self.never_started(f.label):
-                    rows.append((f"fault {f.label}", self.never_started(f.label)))
+                if d is None and (why := self.never_started(f.label)):
+                    rows.append((f"fault {f.label}", why))
                     continue
                 if d is None:
                     rows.append((f"fault {f.label}", f"NOT detected (true interval {windows_text(f.windows_s, self.t_end_s)})"))

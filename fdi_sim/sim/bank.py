@@ -251,12 +251,12 @@ class _Member:
             self.stream.threshold = float(value)
             self.stream._prm[0] = float(value)  # the kernel isolates above it
 
-    def trace_statistic(self) -> NDArray[np.float64]:
-        """The statistic of every armed, valid sample since :meth:`FdiBank.keep_trace` (calibration)."""
+    def trace_series(self) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """The statistic of every sample since :meth:`FdiBank.keep_trace`, and whether each was
+        armed and valid (calibration)."""
         if not self.trace["statistic"]:
-            return np.zeros(0)
-        x = np.concatenate(self.trace["statistic"])
-        return x[np.concatenate(self.trace["valid"])]
+            return np.zeros(0), np.zeros(0, dtype=bool)
+        return np.concatenate(self.trace["statistic"]), np.concatenate(self.trace["valid"])
 
     def reset(self) -> None:
         self.stream.reset()

@@ -445,8 +445,10 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
 
 def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Sequence[Any] | None = None,
                          progress: bool = True, use_cache: bool = True) -> dict[str, Any]:
-    """Set each member's threshold to the ``1 - p`` quantile of its statistic on the fault-free
-    training flights (the same flights the filters were calibrated on), tail-extrapolated.
+    """Set each member's threshold from its statistic on the fault-free training flights (the same
+    flights the filters were calibrated on): the level of ``far_per_h / members`` alarm episodes per
+    flight hour under the bank's k-of-n rule (module docstring); for the angle-magnitude rule, and
+    where the flights hold too few episodes to fit, the ``1 - p`` per-sample quantile.
 
     Returns the record stored in the cache (thresholds, method, training samples per member).
     """
@@ -478,10 +480,9 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
             for lg in logs:
                 _replay_log(bank, lg, raw_thresholds=True)
                 for i, mem in enumerate(bank.members):
-                    stats[i].append(mem.trace_statistic())
+                    st, ok = mem.trace_series()
+                    stats[i].append(st[ok])
                     if episodes:
-                        st = np.concatenate(mem.trace["statistic"]) if mem.trace["statistic"] else np.zeros(0)
-                        ok = np.concatenate(mem.trace["valid"]) if mem.trace["valid"] else np.zeros(0, bool)
                         series[i].append(persistence_series(st, ok, d.k, d.n))
                         hours[i].append(float(ok.sum()) / (float(f.rate_hz) * S_PER_H))
             rate = float(f.far_per_h) / max(1, len(bank.members))
