@@ -24,7 +24,6 @@ from __future__ import annotations
 import difflib
 import hashlib
 import json
-import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Sequence
@@ -453,20 +452,18 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
     Returns the record stored in the cache (thresholds, method, training samples per member).
     """
     from fdi_sim.decision.tail import confident_episode_threshold, confident_tail_threshold, persistence_series
-    from fdi_sim.sim.calibrate import cache_lock, fly_training, training_seeds
+    from fdi_sim.sim.calibrate import cache_lock, fly_training, read_entry, training_seeds, write_entry
 
     f = sc.model.fdi
     key = _thresholds_key(sc, bank, p)
     path = _cache_path(key)
     with cache_lock(path, use_cache):  # another process computing this entry: wait, then read it
-        rec = None
-        if use_cache and path.is_file():
-            try:
-                rec = json.loads(path.read_text())
-                if [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
-                    rec = None
-            except (ValueError, KeyError, OSError):
+        rec = read_entry(path, use_cache)
+        try:
+            if rec is not None and [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
                 rec = None
+        except (KeyError, TypeError):
+            rec = None  # a damaged entry is recomputed
         if rec is None:
             logs = training_logs
             if logs is None:
@@ -503,14 +500,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                     thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
                 rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
                                        "max_training": float(x.max()) if x.size else None})
-            if use_cache:
-                try:
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    tmp = path.with_suffix(f".tmp{os.getpid()}")
-                    tmp.write_text(json.dumps(rec))
-                    os.replace(tmp, path)
-                except OSError:
-                    pass
+            write_entry(path, rec, use_cache)
     for mem, r in zip(bank.members, rec["members"]):
         mem.set_threshold(float(r["threshold"]))
     bank.calibration = rec

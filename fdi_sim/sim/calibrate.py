@@ -151,6 +151,31 @@ class CachedCalibration:
     wall_s: float
 
 
+def read_entry(path: Path, use: bool = True) -> Any:
+    """The JSON cache entry at ``path`` (None without ``use``, when absent, or when damaged: a
+    damaged entry is recomputed)."""
+    if not use or not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (ValueError, OSError):
+        return None
+
+
+def write_entry(path: Path, obj: Any, use: bool = True) -> None:
+    """Write the JSON cache entry ``obj`` at ``path``, committed by rename (a crash leaves no
+    half-written entry); an unwritable cache only costs the next call the flights again."""
+    if not use:
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        tmp.write_text(json.dumps(obj))
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
 @contextmanager
 def cache_lock(path: Path, use: bool = True) -> Iterator[None]:
     """Hold an exclusive lock on ``<path>.lock`` while the cache entry ``path`` is read or computed.
@@ -224,10 +249,11 @@ def gust_kalman_calibration(sc: Scenario, model: Any, *, rate_hz: float = 20.0,
     path = cache_dir() / f"{key}.json"
     with cache_lock(path, use_cache):  # another process computing this entry: wait, then read it
         cal = None
-        if use_cache and path.is_file():
+        entry = read_entry(path, use_cache)
+        if entry is not None:
             try:
-                cal = Calibration.from_dict(json.loads(path.read_text()))
-            except (ValueError, KeyError, OSError):
+                cal = Calibration.from_dict(entry)
+            except (ValueError, KeyError):
                 cal = None  # a damaged cache entry is recomputed
         cached = cal is not None and cal.sigma_m.shape == (det.design.model.n_outputs,) * 2
         if not cached:
@@ -243,14 +269,7 @@ def gust_kalman_calibration(sc: Scenario, model: Any, *, rate_hz: float = 20.0,
             flights = [log_samples(lg, det.design.model, rate_hz) for lg in logs]
             labels = [f"seed {s}, {duration_s:g} s, {sc.model.atmosphere.turbulence} turbulence, faults removed" for s in seeds]
             cal = calibrate(det.design, flights, target, labels)
-            if use_cache:
-                try:
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    tmp = path.with_suffix(f".tmp{os.getpid()}")
-                    tmp.write_text(json.dumps(cal.to_dict()))
-                    os.replace(tmp, path)  # committed by rename: a crash leaves no half-written entry
-                except OSError:
-                    pass  # an unwritable cache only costs the next call the flights again
+            write_entry(path, cal.to_dict(), use_cache)
     assert cal is not None
     detector = GustKalmanDetector(det.design, cal, min_cosine=det.min_cosine, use_analytic_threshold=det.use_analytic)
     return CachedCalibration(detector, key, path, cached, time.perf_counter() - t0)
