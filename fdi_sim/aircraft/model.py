@@ -249,6 +249,30 @@ class Aircraft:
 
         return read_combined
 
+    def flat_reader(self, names: Sequence[str], extra: Sequence[str] = ()
+                    ) -> tuple[Callable[[], list[float]], list[tuple[int, int, float | None]]]:
+        """The properties behind the named signals, read flat, then the ``extra`` properties.
+
+        Returns ``(read, plan)``: ``read()`` gives the raw property values as a new list of
+        Python floats (one ``map`` of the node getter, nothing combined); ``plan`` gives per signal
+        its reads ``[first, end)`` and its factor (None: unscaled). A signal is the sum of its reads
+        (Python's ``sum``), times its factor: :meth:`list_reader`'s value (the loop's compiled core,
+        :mod:`fdi_sim.sim._core`, combines them).
+        """
+        nodes: list[object] = []
+        plan: list[tuple[int, int, float | None]] = []
+        for name in names:
+            props = self._signal_props(name)
+            plan.append((len(nodes), len(nodes) + len(props), self._signal_factor(name)))
+            nodes.extend(self.node(p) for p in props)
+        nodes.extend(self.node(p) for p in extra)
+        get = jsbsim.FGPropertyNode.get_double_value
+
+        def read() -> list[float]:
+            return list(map(get, nodes))
+
+        return read, plan
+
     def read(self, names: Sequence[str]) -> NDArray[np.float64]:
         """Read the named signals once (slow path; use :meth:`reader` in loops)."""
         return self.reader(names)()
