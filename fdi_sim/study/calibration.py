@@ -34,7 +34,7 @@ from fdi_sim.sim.bank import LATE_GRACE_S
 from fdi_sim.sim.calibrate import HeldRate, StudyMemberThreshold, StudyThresholds
 from fdi_sim.study.rescore import (SCALE_NUDGE, _outside, _runs, exceedances, persistence, persistence_level,
                                    rescore)
-from fdi_sim.study.stats import BANK, exposure_s, overdispersed_rate
+from fdi_sim.study.stats import BANK, dispersion, exposure_s, overdispersed_rate, rate_ratio_interval
 from fdi_sim.units import S_PER_H
 
 __all__ = ["Calibration", "CALIBRATION_METHOD", "calibrate_threshold", "CalibrationCheck", "check_calibration",
@@ -185,6 +185,17 @@ class CalibrationCheck:
         Quasi-Poisson dispersion of the held-out per-run counts (1: Poisson; None: no alarm).
     far_per_h_ci_poisson : tuple of float
         The plain exact Poisson interval [1/h] (independent events).
+    calibration_false_alarms : int
+        On the calibration half at the calibrated scale (by the direct rule, like the held-out count).
+    rate_ratio : float
+        Held-out rate over the calibration half's rate at that scale [-].
+    rate_ratio_ci : tuple of float
+        Its exact conditional interval, scaled by the dispersion of the per-run counts of both
+        halves (:func:`fdi_sim.study.stats.rate_ratio_interval`).
+    consistent : bool
+        1 lies in ``rate_ratio_ci``: the held-out rate is what the calibration predicts. This is
+        the check that allows for the calibration's own sampling error (the threshold rests on the
+        calibration half's few alarms); ``target_inside`` treats the threshold as exact.
     """
 
     calibration: Calibration
@@ -198,6 +209,10 @@ class CalibrationCheck:
     confidence: float
     dispersion: float | None = None
     far_per_h_ci_poisson: tuple[float, float] | None = None
+    calibration_false_alarms: int | None = None
+    rate_ratio: float | None = None
+    rate_ratio_ci: tuple[float, float] | None = None
+    consistent: bool | None = None
 
 
 def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path, detector: str,
@@ -206,7 +221,10 @@ def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path,
                       ) -> CalibrationCheck:
     """Calibrate on the runs of even index (``split = "even"``; ``"odd"``: the other way) and
     give the other half's false-alarm rate at that scale with its exact Poisson interval, scaled by
-    the held-out runs' dispersion (quasi-Poisson) where their alarms cluster by run.
+    the held-out runs' dispersion (quasi-Poisson) where their alarms cluster by run, and the ratio
+    of that rate to the calibration half's at the same scale with its exact conditional interval
+    (``consistent``: the held-out rate is what the calibration predicts, allowing for the
+    calibration's own sampling error).
 
     The held-out count is re-scored by the direct rule (:func:`rescore`), not by the
     calibration's own sweep, so the two halves share nothing but the scale.
@@ -220,14 +238,18 @@ def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path,
     # run by run: a run's sampled turbulence, wind and biases make its false alarms cluster
     # (measured on the DHC-6 attitude check: one run holds several), so the interval is the
     # dispersion-scaled Garwood one (quasi-Poisson), which the plain interval equals when phi <= 1
-    runs, counts, expos = 0, [], []
-    for r in held:
-        dr = rescore([r], out_dir, [cal.scale], k=k, n=n, grace_s=grace_s).detectors.get(detector)
-        if dr is not None:
-            runs += dr.runs
-            if dr.exposure_h > 0:
-                counts.append(int(dr.false_alarms[0]))
-                expos.append(dr.exposure_h)
+    def per_run(rs: Sequence[Mapping[str, Any]]) -> tuple[int, list[int], list[float]]:
+        n_runs, counts, expos = 0, [], []
+        for r in rs:
+            dr = rescore([r], out_dir, [cal.scale], k=k, n=n, grace_s=grace_s).detectors.get(detector)
+            if dr is not None:
+                n_runs += dr.runs
+                if dr.exposure_h > 0:
+                    counts.append(int(dr.false_alarms[0]))
+                    expos.append(dr.exposure_h)
+        return n_runs, counts, expos
+
+    runs, counts, expos = per_run(held)
     expo_h = float(sum(expos))
     if expo_h <= 0:
         raise StudyError(str(out_dir), detector, f"no held-out ({'odd' if par == 0 else 'even'}) completed run "
@@ -235,8 +257,16 @@ def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path,
     c = int(sum(counts))
     _, (lo, hi), phi = overdispersed_rate(counts, expos, confidence)
     plain = poisson_rate_interval(c, expo_h, confidence)
+    # the threshold rests on the calibration half's own alarms (a few, at a low target): the
+    # held-out rate is compared with that half's rate at the same scale, both counts uncertain
+    _, c_counts, c_expos = per_run(fit)
+    phi_both = dispersion(counts + c_counts, expos + c_expos)
+    c_cal = int(sum(c_counts))
+    rho, (r_lo, r_hi) = rate_ratio_interval(c_cal, float(sum(c_expos)), c, expo_h, confidence,
+                                            phi_both if phi_both is not None else 1.0)
     return CalibrationCheck(cal, split, runs, c, expo_h, c / expo_h, (float(lo), float(hi)),
-                            bool(lo <= target_per_h <= hi), confidence, phi, (float(plain[0]), float(plain[1])))
+                            bool(lo <= target_per_h <= hi), confidence, phi, (float(plain[0]), float(plain[1])),
+                            c_cal, float(rho), (float(r_lo), float(r_hi)), bool(r_lo <= 1.0 <= r_hi))
 
 
 # --- the thresholds file of a study ------------------------------------------------------------------

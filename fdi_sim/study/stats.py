@@ -200,6 +200,37 @@ def overdispersed_rate(counts: Sequence[float], exposures_h: Sequence[float], co
     return k_sum / e_sum, [lo * scale / e_sum, hi * scale / e_sum], phi
 
 
+def rate_ratio_interval(k_a: float, expo_a_h: float, k_b: float, expo_b_h: float, confidence: float,
+                        phi: float = 1.0) -> tuple[float, tuple[float, float]]:
+    """The ratio of two Poisson rates ``(k_b / E_b) / (k_a / E_a)`` and its exact conditional interval.
+
+    Given ``k_a + k_b`` events, ``k_b`` is binomial with ``w = E_b rho / (E_a + E_b rho)``
+    (``rho`` the rate ratio); the Clopper-Pearson interval of ``w`` mapped to ``rho`` is the exact
+    conditional interval (Breslow and Day 1987, sec. 2.3). Where the per-run counts are
+    overdispersed (quasi-Poisson, ``phi > 1``) both counts are divided by ``phi`` (the effective
+    numbers of independent events), the Beta quantiles taking non-integer counts.
+
+    Returns
+    -------
+    tuple
+        ``(rho, (lo, hi))`` [-]; ``hi`` is inf when ``k_a = 0``.
+    """
+    if expo_a_h <= 0.0 or expo_b_h <= 0.0:
+        raise ValueError("both exposures must be positive")
+    scale = max(1.0, float(phi))
+    a, b = k_a / scale, k_b / scale
+    alpha = (1.0 - confidence) / 2.0
+    w_lo = 0.0 if b == 0 else float(scipy_stats.beta.ppf(alpha, b, a + 1.0))
+    w_hi = 1.0 if a == 0 else float(scipy_stats.beta.ppf(1.0 - alpha, b + 1.0, a))
+    odds = expo_a_h / expo_b_h  # rho = w / (1 - w) x E_a / E_b
+
+    def to_rho(w: float) -> float:
+        return math.inf if w >= 1.0 else w / (1.0 - w) * odds
+
+    rho = math.inf if k_a == 0 else (k_b / expo_b_h) / (k_a / expo_a_h)
+    return rho, (to_rho(w_lo), to_rho(w_hi))
+
+
 def delay_quantiles(delays_s: Sequence[float]) -> tuple[float | None, float | None]:
     """Median and 95th percentile [s] (None without detections)."""
     if not len(delays_s):

@@ -301,29 +301,30 @@ def test_replay_at_the_study_threshold_gives_the_runs_alarms(dhc6, f16) -> None:
     assert n_alarms > 0
 
 
-@pytest.mark.parametrize("detector", [
-    "kalman-gust-v1",
-    pytest.param("bank", marks=pytest.mark.xfail(strict=True, reason=(
-        "measured (session 8, episode-rate thresholds in the runs): calibrated on the even runs to 10 per h (scale "
-        "0.793, 4 alarms there), the odd runs give 12 in 0.417 h = 28.8 per h [14.6, 51.1] (dispersion 1.06, so not "
-        "clustering); 4 against 12 in equal hours is a two-sample p of about 0.08: the calibration half's own "
-        "count of 4 is as uncertain as the held-out one, and the check's interval ignores that"))),
-    pytest.param("kinematic-attitude-v1", marks=pytest.mark.xfail(strict=True, reason=(
-        "measured (session 8): calibrated on the even runs to 10 per h (scale 0.772), the odd runs give 15 in 0.417 h "
-        "= 36 per h [15.9, 70.0] with the dispersion-scaled interval (plain Poisson [20.1, 59.4] in session 6): "
-        "this check's false alarms cluster in some runs (sampled turbulence, wind, noise)"))),
-])
-def test_threshold_calibrated_on_half_gives_the_target_on_the_other_half(dhc6, detector: str) -> None:
+@pytest.mark.parametrize("target", [10.0, 40.0])
+@pytest.mark.parametrize("detector", ["kalman-gust-v1", "bank", "kinematic-attitude-v1"])
+def test_threshold_calibrated_on_half_gives_the_target_on_the_other_half(dhc6, detector: str, target: float) -> None:
     """Issue 14's self-consistency bar: a threshold set to a target false-alarm rate on the even
-    runs gives a rate on the odd runs whose exact 95 % Poisson interval (scaled by the runs'
-    dispersion where their alarms cluster) holds the target."""
+    runs gives on the odd runs the rate the calibration predicts: the ratio of the held-out rate to
+    the calibration half's, with its exact conditional interval scaled by the per-run dispersion,
+    holds 1.
+
+    Why not the held-out interval alone (``target_inside``): measured on this study (session 9), at
+    10 per h the calibration rests on 4 alarms per half, and the attitude check's alarms come from
+    the runs with the largest sampled sensor noise (noise_scale >= 1.05: 18 of 20 alarms at the
+    even-half scale, none below 0.95; turbulence light or moderate made no difference). Calibrated
+    on the even runs, the odd ones gave 15 (36 per h [15.9, 70.0]); calibrated on the odd runs, the
+    even ones gave 1: the halves differ by their noisiest runs, and the threshold carries the
+    calibration half's sampling error. 40 per h puts about 16 alarms in each half."""
     from fdi_sim.study.rescore import check_calibration
 
     _, _, out, _ = dhc6
     recs = load_records(out)
-    target = 10.0  # per flight hour: ~4 alarms per half (0.42 armed hours), enough to place a threshold
     chk = check_calibration(recs, out, detector, target)
-    print(f"{detector}: scale {chk.calibration.scale:.3f} on the even runs; odd runs {chk.false_alarms} false alarms "
-          f"in {chk.exposure_h:.3f} h = {chk.far_per_h:.2f} per h [{chk.far_per_h_ci[0]:.2f}, {chk.far_per_h_ci[1]:.2f}]"
-          f" against the target {target}")
-    assert chk.target_inside, chk
+    print(f"{detector}: target {target} per h: scale {chk.calibration.scale:.3f} on the even runs "
+          f"({chk.calibration_false_alarms} alarms); odd runs {chk.false_alarms} in {chk.exposure_h:.3f} h = "
+          f"{chk.far_per_h:.2f} per h [{chk.far_per_h_ci[0]:.2f}, {chk.far_per_h_ci[1]:.2f}]; ratio {chk.rate_ratio:.2f} "
+          f"[{chk.rate_ratio_ci[0]:.2f}, {chk.rate_ratio_ci[1]:.2f}]")
+    assert chk.calibration_false_alarms <= target * chk.calibration.exposure_h  # the calibration met its target
+    assert chk.calibration_false_alarms >= 0.5 * target * chk.calibration.exposure_h  # and rests on alarms
+    assert chk.consistent, chk

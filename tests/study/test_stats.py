@@ -234,3 +234,39 @@ def test_overdispersed_interval_equals_garwood_for_poisson_counts() -> None:
     _, ci = rate(int(k.sum()), float(e_h.sum()), 0.95)
     assert ci_od == pytest.approx(ci, rel=1e-12)
     assert dispersion([0, 0], [1.0, 1.0]) is None and dispersion([3], [1.0]) is None
+
+
+def test_rate_ratio_interval_is_the_exact_conditional_one_and_covers() -> None:
+    """The rate-ratio interval is the Clopper-Pearson interval of k_b out of k_a + k_b mapped to
+    the ratio (integer counts, phi 1), and it covers the true ratio of two Poisson halves at least
+    95 % of the time (exact conditional intervals are conservative); with gamma-mixed per-run rates
+    (shape 0.2, 40 per h) and the pooled dispersion it keeps its coverage, where phi = 1 under-covers
+    (measured over 2,000 pairs: Poisson 0.976; clustered 0.973 with phi, 0.866 without)."""
+    from fdi_sim.decision.intervals import clopper_pearson
+    from fdi_sim.study.stats import dispersion, rate_ratio_interval
+
+    rho, (lo, hi) = rate_ratio_interval(4, 0.5, 12, 0.25, 0.95)
+    w_lo, w_hi = clopper_pearson(12, 16, 0.95)
+    assert rho == pytest.approx(6.0)
+    assert lo == pytest.approx(w_lo / (1 - w_lo) * 2.0, rel=1e-9) and hi == pytest.approx(w_hi / (1 - w_hi) * 2.0, rel=1e-9)
+    assert rate_ratio_interval(0, 1.0, 3, 1.0, 0.95)[1][1] == math.inf
+    assert rate_ratio_interval(3, 1.0, 0, 1.0, 0.95)[1][0] == 0.0
+    with pytest.raises(ValueError):
+        rate_ratio_interval(1, 0.0, 1, 1.0, 0.95)
+    rng = np.random.default_rng(14)
+    n, e = 2000, np.full(100, 20.0 / 3600.0)  # two halves of 100 runs of 20 s, 10 per h: ~5.6 alarms each
+    hits = hits_mixed = hits_mixed_plain = 0
+    for _ in range(n):
+        ka, kb = rng.poisson(10.0 * e.sum()), rng.poisson(10.0 * e.sum())
+        _, (lo, hi) = rate_ratio_interval(ka, e.sum(), kb, e.sum(), 0.95)
+        hits += lo <= 1.0 <= hi
+        ca = rng.poisson(rng.gamma(0.2, 40.0 / 0.2, e.size) * e)  # clustered by run, 40 per h
+        cb = rng.poisson(rng.gamma(0.2, 40.0 / 0.2, e.size) * e)
+        phi = dispersion(np.concatenate([ca, cb]), np.concatenate([e, e]))
+        _, (lo, hi) = rate_ratio_interval(ca.sum(), e.sum(), cb.sum(), e.sum(), 0.95, phi or 1.0)
+        hits_mixed += lo <= 1.0 <= hi
+        _, (lo, hi) = rate_ratio_interval(ca.sum(), e.sum(), cb.sum(), e.sum(), 0.95)
+        hits_mixed_plain += lo <= 1.0 <= hi
+    print(f"coverage: Poisson {hits / n:.3f}, clustered with phi {hits_mixed / n:.3f}, without {hits_mixed_plain / n:.3f}")
+    assert hits / n >= 0.95 - 2.6 * math.sqrt(0.05 * 0.95 / n)
+    assert hits_mixed / n >= 0.95 - 2.6 * math.sqrt(0.05 * 0.95 / n) and hits_mixed_plain / n < 0.92
