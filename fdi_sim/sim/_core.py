@@ -223,6 +223,7 @@ def _fresh_cache(stamp_path: Path, stamp: str, flush: Callable[[], None]) -> boo
         pass
     flush()
     try:
+        stamp_path.parent.mkdir(parents=True, exist_ok=True)
         stamp_path.write_text(stamp)
     except OSError:
         pass

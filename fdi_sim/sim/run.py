@@ -544,6 +544,10 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
           per_step: bool = True):
     """The per-step loop; returns (status, reason, time of the status [s], max deviations, steps).
 
+    The truth, its divergence checks, the sensors, the pilot and the deviation statistics are one
+    compiled call a step (:mod:`fdi_sim.sim._core`); a faulty flight measures and flies the pilot
+    on lists (the injector's contract) and uses the core for the truth and the statistics.
+
     ``steps`` counts the steps whose measurements, commands and (with ``per_step``) log rows are
     complete: rows 0 .. steps-1. With a bank, every detector sample ``j`` is taken at step ``j n``
     (module :mod:`fdi_sim.sim.bank`): the measurement row before the pilot, the command row after

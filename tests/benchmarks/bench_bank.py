@@ -2,7 +2,8 @@
 
 Issue 13's goal: the full loop with the default bank at >= 0.4 of bare JSBSim's step rate on both
 aircraft, measured in the same process, with the log as `fdi-sim run` writes it (every 120 Hz
-topic) and as a Monte Carlo run writes it (``[log] per_step = false``: FDI topics only). Bare
+topic), with FDI topics only (``[log] per_step = false``), and as a Monte Carlo run writes it
+(``study``: FDI topics without the residuals, what ``fdi_sim.study.spec`` gives a study's runs). Bare
 JSBSim here is what bench_loop.py measures: one command write and one ``run()`` per step, trimmed,
 moderate turbulence. The bank's designs and thresholds come from the cache (the first run
 calibrates). Then a profile of one full-log run: where the wall time of the loop goes. Never a
@@ -35,15 +36,17 @@ turbulence = "moderate"
 [fdi]
 bank = "{bank}"
 block_s = {block_s}
+log_residuals = {resid}
 [log]
 per_step = {per_step}
 """
 CASES = {"f16": (10000.0, "vt_kts = 400.0"), "DHC6": (5000.0, "vc_kts = 120.0")}
 
 
-def scenario(ac: str, T: float, bank: str, per_step: bool, block_s: float = 0.5):
+def scenario(ac: str, T: float, bank: str, per_step: bool, block_s: float = 0.5, residuals: bool = True):
     h, speed = CASES[ac]
-    return loads(SC.format(ac=ac, T=T, h=h, speed=speed, bank=bank, per_step=str(per_step).lower(), block_s=block_s))
+    return loads(SC.format(ac=ac, T=T, h=h, speed=speed, bank=bank, per_step=str(per_step).lower(), block_s=block_s,
+                           resid=str(residuals).lower()))
 
 
 def loop_rate(sc, d: str) -> float:
@@ -56,16 +59,19 @@ def main(T: float = 120.0, repeats: int = 3) -> None:
           f"{'overhead us/step':>17}")
     with tempfile.TemporaryDirectory() as d:
         for ac in CASES:
-            for bank, per_step, block in (("none", True, 0.5), ("default", True, 0.5), ("none", False, 0.5),
-                                          ("default", False, 0.5), ("default", False, 1.0)):
-                sc = scenario(ac, T, bank, per_step, block)
-                run(scenario(ac, 2.0, bank, per_step, block), d, progress=False, force=True)  # designs, compile
+            # the last: as a Monte Carlo study logs (fdi_sim.study.spec: FDI topics, no residuals)
+            for bank, per_step, block, resid in (("none", True, 0.5, True), ("default", True, 0.5, True),
+                                                 ("none", False, 0.5, True), ("default", False, 0.5, True),
+                                                 ("default", False, 1.0, True), ("default", False, 0.5, False)):
+                sc = scenario(ac, T, bank, per_step, block, resid)
+                run(scenario(ac, 2.0, bank, per_step, block, resid), d, progress=False, force=True)  # designs, compile
                 bare, loop = [], []
                 for _ in range(repeats):  # interleaved so that machine load hits both alike
                     bare.append(bare_rate(ac, sc, T))
                     loop.append(loop_rate(sc, d))
                 b, lp = max(bare), max(loop)
-                print(f"{ac:8} {'full' if per_step else 'fdi only':10} {bank:8} {block:7g} {b:13.0f} {lp:13.0f} {lp / b:6.2f} "
+                log = "full" if per_step else ("fdi only" if resid else "study")
+                print(f"{ac:8} {log:10} {bank:8} {block:7g} {b:13.0f} {lp:13.0f} {lp / b:6.2f} "
                       f"{1e6 / lp - 1e6 / b:17.1f}", flush=True)
         for ac in CASES:
             sc = scenario(ac, T, "default", True)

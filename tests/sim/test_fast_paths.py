@@ -1,7 +1,8 @@
 """The simulation loop's fast paths give the same floats as the general paths, bit for bit.
 
-The loop reads the truth with :meth:`Aircraft.list_reader` and measures with
-:meth:`SensorSuite.step_list` (Python floats, no numpy per step); the logs must not change for it.
+The loop reads the JSBSim properties flat (:meth:`Aircraft.flat_reader`) and its compiled core
+(:mod:`fdi_sim.sim._core`) builds the truth, checks it and measures; faulty flights measure with
+:meth:`SensorSuite.step_list` (Python floats); the logs must not change for either.
 Real JSBSim, short runs in moderate turbulence so that every signal moves.
 """
 from __future__ import annotations
