@@ -55,7 +55,7 @@ from fdi_sim.flightlog.records import MCAP_MAGIC
 from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimPoint
 from fdi_sim.scenario import Scenario
 from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
-from fdi_sim.sim import _core
+import fdi_sim.sim._core as _core  # the module itself (from fdi_sim.sim import: a package cycle)
 from fdi_sim.sim.bank import BankAlarm, FaultDetection, FdiBank, fdi_outcomes
 from fdi_sim.units import DEG_PER_RAD, RAD_PER_DEG
 
