@@ -124,6 +124,21 @@ def _euler_matrix(phi_rad: NDArray, theta_rad: NDArray) -> NDArray[np.float64]:
     return E
 
 
+def euler_inverse_apply(phi_rad: NDArray, theta_rad: NDArray, e: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``E^-1 e`` (N, 3) for the Euler-rate matrix ``E`` of :func:`_euler_matrix`, in closed form.
+
+    ``E^-1 = [[1, 0, -sin(theta)], [0, cos(phi), sin(phi) cos(theta)], [0, -sin(phi), cos(phi) cos(theta)]]``
+    (the body rates of the Euler rates, 3-2-1). Elementwise, so each number is the same sequence of
+    IEEE operations on every CPU and BLAS, which the streaming check
+    (:mod:`fdi_sim.detectors.kinematic_stream`) repeats bit for bit; ``np.linalg.solve`` rounds as its
+    BLAS kernel does, which differs between CPUs (with and without fused multiply-adds: measured on
+    OpenBLAS 0.3.31's Haswell kernels on an Intel AVX-512 and an AMD EPYC machine).
+    """
+    sp, cp, st, ct = np.sin(phi_rad), np.cos(phi_rad), np.sin(theta_rad), np.cos(theta_rad)
+    e0, e1, e2 = e[:, 0], e[:, 1], e[:, 2]
+    return np.column_stack([e0 - st * e2, cp * e1 + (sp * ct) * e2, (cp * ct) * e2 - sp * e1])
+
+
 def dcm_body_to_ned(phi_rad: NDArray, theta_rad: NDArray, psi_rad: NDArray) -> NDArray[np.float64]:
     """Direction-cosine matrices (N, 3, 3), ``v_ned = R v_body`` (3-2-1 rotation)."""
     sf, cf, st, ct, ss, cs = (np.sin(phi_rad), np.cos(phi_rad), np.sin(theta_rad), np.cos(theta_rad),
@@ -417,8 +432,7 @@ class KinematicDetector:
             e[n:] = d_att - (I[n:] - I[:-n])
         # e = E b T  ->  b_hat = E^-1 e / T (the equivalent gyro bias); only the new rows are returned
         b = np.full_like(e, np.nan)
-        E = _euler_matrix(phi[L0:], theta[L0:])
-        b[L0:] = np.linalg.solve(E, np.nan_to_num(e[L0:])[:, :, None])[:, :, 0] / (n * dt)
+        b[L0:] = euler_inverse_apply(phi[L0:], theta[L0:], np.nan_to_num(e[L0:])) / (n * dt)
         b[~np.isfinite(e).all(axis=1)] = np.nan
         b[~self._valid_window(c["_ok"], n)] = np.nan
         return b

@@ -15,10 +15,10 @@ How each batch operation is reproduced sequentially (same operands, same order o
   GNSS samples are integrated when the second arrives (``v = s (k - k1) + v1``,
   ``s = (v2 - v1) / (k2 - k1)``, numpy's formula); before the first sample v_down is the first
   sample (numpy's left value). The residual is only evaluated at GNSS samples, so this is causal.
-- ``np.linalg.solve`` of the 3x3 Euler matrix is OpenBLAS's ``dgesv`` written out: partial
-  pivoting, the multiplier through the reciprocal of the pivot, fused multiply-adds in the two
-  triangular solves (measured equal, bitwise, on 200 000 random attitudes with the OpenBLAS
-  0.3.31 Haswell kernels numpy ships; another BLAS may differ by an ulp).
+- ``E^-1 e`` (the equivalent gyro bias) is the closed form of
+  :func:`fdi_sim.detectors.kinematic.euler_inverse_apply`, the same elementwise operations in the
+  same order (it replaced ``np.linalg.solve``, whose rounding depends on the BLAS kernel the CPU
+  gets: fused multiply-adds in the triangular solves on one machine, none on another).
 - ``np.einsum("nij,nj->ni")`` sums ``(a0 b0 + a2 b2) + a1 b1``; ``"nji,nj->ni"`` and
   ``np.linalg.norm(axis=1)`` sum in order (measured on numpy 2.4).
 
@@ -52,8 +52,6 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from numba import types
-from numba.extending import intrinsic
 from numpy.typing import NDArray
 
 from fdi_sim.detectors import kinematic as _kin
@@ -76,17 +74,6 @@ _Q_N_WIN, _Q_N_AVG, _Q_N_VALID, _Q_N_WARM, _Q_DEBIAS, _Q_SHARED, _Q_NCOL, _Q_PSI
 _S_K, _S_LAST_BAD, _S_N_MEAN, _S_N_GNSS, _S_HAS_LAST, _S_J1, _S_NANC = range(7)  # _S_NANC: one per channel
 # float state: the bias mean first (one per channel), then per kind
 _F_MEAN = 0
-
-
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """``a b + c`` with one rounding (llvm.fma; the C library's fma where the CPU has none)."""
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):
-        return builder.fma(*args)
-
-    return sig, codegen
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -238,24 +225,6 @@ _FA_ED, _FA_I = 3, 6
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _solve_euler(a01, a02, a11, a12, a21, a22, b0, b1, b2):
-    """``E x = b`` for ``E = [[1, a01, a02], [0, a11, a12], [0, a21, a22]]``, as OpenBLAS dgesv rounds it."""
-    if abs(a21) > abs(a11):  # partial pivoting (the first of equal magnitudes stays)
-        a11, a21 = a21, a11
-        a12, a22 = a22, a12
-        b1, b2 = b2, b1
-    l21 = a21 * (1.0 / a11)  # getf2: the column scaled by the reciprocal pivot
-    u22 = a22 - l21 * a12
-    y2 = _fma(-b1, l21, b2)  # trsv (lower, unit): axpy
-    x2 = y2 / u22  # trsv (upper): divide, then axpy
-    t1 = _fma(-x2, a12, b1)
-    t0 = _fma(-x2, a02, b0)
-    x1 = t1 / a11
-    x0 = _fma(-x1, a01, t0)
-    return x0, x1, x2
-
-
-@numba.njit(cache=True, error_model="numpy")
 def _attitude(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, prm, iprm, fs, ist, ring, vals, r):
     _check(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, iprm[_Q_NCOL], 3)
     n = iprm[_Q_N_WIN]
@@ -288,7 +257,8 @@ def _attitude(t_s, y, ok, fresh, out_z, out_valid, out_hyp, out_r, prm, iprm, fs
             e2 = _wrap(psi - ring[s0, 2]) - (i2 - ring[s0, 5])
             if math.isfinite(e0) and math.isfinite(e1) and math.isfinite(e2) and _window_ok(ist, k, n):
                 # b_hat = E^-1 e / T, the equivalent gyro bias [rad/s]
-                b0, b1, b2 = _solve_euler(tt * sp, tt * cp, cp, -sp, sp / ct, cp / ct, e0, e1, e2)
+                st = math.sin(theta)  # E^-1 e in closed form (kinematic.euler_inverse_apply)
+                b0, b1, b2 = e0 - st * e2, cp * e1 + (sp * ct) * e2, (cp * ct) * e2 - sp * e1
                 T = prm[_P_T_WIN]
                 r[0], r[1], r[2] = b0 / T, b1 / T, b2 / T
         _finish(j, r, prm, iprm, fs, ist, out_z, out_valid, out_hyp, out_r)
