@@ -190,8 +190,40 @@ class _Crossings:
         return int(np.searchsorted(self.lo, x, "right") - np.searchsorted(self.hi, x, "right"))
 
 
-def _count(cs: Sequence[_Crossings], w: NDArray[np.int64], x: float) -> int:
-    return int(sum(int(wi) * c.count(x) for c, wi in zip(cs, w) if wi))
+class _Pool:
+    """The upcrossing intervals of several flights pooled, for counts with per-flight weights.
+
+    ``sum_i w_i count_i(x)`` is ``W_lo(x) - W_hi(x)``, the weights of the pooled interval starts and
+    ends at or below ``x``: two binary searches in the sorted pooled ends and their cumulative
+    weights (the same integers as the per-flight sum, without a Python loop over flights; a
+    bootstrap resample only redoes the cumulative sums).
+    """
+
+    def __init__(self, cs: Sequence[_Crossings]) -> None:
+        self.cs = list(cs)
+        own = [np.full(c.lo.size, i, dtype=np.int64) for i, c in enumerate(self.cs)]
+        lo = np.concatenate([c.lo for c in self.cs]) if self.cs else np.zeros(0)
+        hi = np.concatenate([c.hi for c in self.cs]) if self.cs else np.zeros(0)
+        owner = np.concatenate(own) if own else np.zeros(0, dtype=np.int64)
+        i_lo, i_hi = np.argsort(lo, kind="stable"), np.argsort(hi, kind="stable")
+        self.lo, self.lo_owner = lo[i_lo], owner[i_lo]
+        self.hi, self.hi_owner = hi[i_hi], owner[i_hi]
+
+    def counter(self, w: NDArray[np.int64]) -> "_Counter":
+        return _Counter(self, np.asarray(w, dtype=np.int64))
+
+
+class _Counter:
+    """Weighted episode counts of a :class:`_Pool` at any level (``count(x)``)."""
+
+    def __init__(self, pool: _Pool, w: NDArray[np.int64]) -> None:
+        self.pool = pool
+        self.cw_lo = np.concatenate([[0], np.cumsum(w[pool.lo_owner])])
+        self.cw_hi = np.concatenate([[0], np.cumsum(w[pool.hi_owner])])
+
+    def count(self, x: float) -> int:
+        p = self.pool
+        return int(self.cw_lo[np.searchsorted(p.lo, x, "right")] - self.cw_hi[np.searchsorted(p.hi, x, "right")])
 
 
 def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hours: float,
@@ -243,34 +275,36 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
     DesignError
         A non-positive target or too few episodes for a fit.
     """
-    cs = [_Crossings(m) for m in flights]
-    w = np.ones(len(cs), dtype=np.int64) if weights is None else np.asarray(weights, dtype=np.int64)
-    return _episode_fit(cs, w, rate_per_h, hours)[:2]
+    pool = _Pool([_Crossings(m) for m in flights])
+    w = np.ones(len(pool.cs), dtype=np.int64) if weights is None else np.asarray(weights, dtype=np.int64)
+    return _episode_fit(pool, w, rate_per_h, hours)[:2]
 
 
-def _episode_fit(cs: Sequence[_Crossings], w: NDArray[np.int64], rate_per_h: float, hours: float,
+def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float, hours: float,
                  power: float | None = None, heavy: bool | None = None) -> tuple[float, str, float, bool]:
-    """:func:`episode_threshold` on the flights ``cs`` counted ``w`` times each, and the scale
+    """:func:`episode_threshold` on the flights of ``pool`` counted ``w`` times each, and the scale
     (``power``) and tail (``heavy``) it chose, which a bootstrap resample is given so that it
     varies the fit, not the model."""
     if not (rate_per_h > 0.0 and math.isfinite(rate_per_h)):
         raise DesignError(f"episode rate target must be > 0 per flight hour, got {rate_per_h}")
+    cs = pool.cs
     n_fin = sum(int(wi) * c.finite.size for c, wi in zip(cs, w))
     if n_fin < 2 * TAIL_EPISODES or hours <= 0.0:
         raise DesignError(f"{n_fin} valid training samples are too few for an episode-rate threshold; fly more "
                           "or longer calibration flights")
+    counter = pool.counter(w)
     want = rate_per_h * hours  # episodes the training flights would show at the threshold
     # the highest level with about TAIL_EPISODES episodes (bisection; the count falls as the level rises)
     used = [c for c, wi in zip(cs, w) if wi]
     lo = float(np.median(np.concatenate([c.finite for c in used])))
     hi = max(c.top for c in used)
-    at_median = _count(cs, w, lo)
+    at_median = counter.count(lo)
     if at_median < MIN_EPISODES:
         raise DesignError(f"only {at_median} alarm episodes above the median of the training statistic (a "
                           f"fit needs {MIN_EPISODES}); fly more or longer calibration flights")
     for _ in range(50 if at_median > TAIL_EPISODES else 0):  # else: fit above the median
         mid = 0.5 * (lo + hi)
-        if _count(cs, w, mid) >= TAIL_EPISODES:
+        if counter.count(mid) >= TAIL_EPISODES:
             lo = mid
         else:
             hi = mid
@@ -283,7 +317,7 @@ def _episode_fit(cs: Sequence[_Crossings], w: NDArray[np.int64], rate_per_h: flo
     split = 1.0
     for r in range(MIN_EMPIRICAL_EPISODES, peaks.size, MIN_EMPIRICAL_EPISODES):
         x = float(np.nextafter(top[r - 1], -np.inf))  # just below the r-th peak: r peaks above it
-        split = max(split, _count(cs, w, x) / r)
+        split = max(split, counter.count(x) / r)
     if MIN_EMPIRICAL_EPISODES <= want / split < peaks.size:
         i = int(math.floor(want / split))  # the level with that many peaks above it
         return float(top[i]), (f"empirical: {i} of {peaks.size} episode peaks above it in {hours:.2f} h "
@@ -342,17 +376,17 @@ def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per
     """
     level = check_probability(level, "confidence level")
     keep = [i for i, m in enumerate(flights) if len(m)]
-    cs = [_Crossings(flights[i]) for i in keep]
+    pool = _Pool([_Crossings(flights[i]) for i in keep])
     h = np.array([float(hours[i]) for i in keep])
-    if len(cs) < 2:
+    if len(pool.cs) < 2:
         raise DesignError("a confident threshold needs at least two training flights")
-    k = len(cs)
-    point, how, power, heavy = _episode_fit(cs, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()))
+    k = len(pool.cs)
+    point, how, power, heavy = _episode_fit(pool, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()))
     boot = []
     for _ in range(n_boot):
         w = np.bincount(rng.integers(0, k, k), minlength=k)
         try:
-            boot.append(_episode_fit(cs, w, rate_per_h, float(w @ h), power=power, heavy=heavy)[0])
+            boot.append(_episode_fit(pool, w, rate_per_h, float(w @ h), power=power, heavy=heavy)[0])
         except DesignError:
             continue  # a resample with too few episodes says nothing about the bound
     if len(boot) < n_boot // 2:
