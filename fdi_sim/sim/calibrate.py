@@ -28,7 +28,7 @@ from fdi_sim import __version__
 from fdi_sim.errors import DesignError
 from fdi_sim.detectors.gust_kalman import Calibration, GustKalmanDetector, calibrate
 from fdi_sim.detectors.samples import log_samples
-from fdi_sim.flightlog import read_log
+from fdi_sim.flightlog import TOPIC_SENSORS
 from fdi_sim.scenario import Scenario
 from fdi_sim.scenario.loader import from_dict
 
@@ -57,7 +57,9 @@ def training_seeds(n: int) -> tuple[int, ...]:
 
 def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress: bool = True,
                  label: str = "") -> list[Any]:
-    """Fly the fault-free training flights; return their logs (read back, files removed).
+    """Fly the fault-free training flights; return their logs: the measurement and command topics,
+    kept in memory as the log would hold them (``run(..., keep_rows=True)``: no per-step topic is
+    written or read back, which was half a training flight's cost).
 
     Parameters
     ----------
@@ -79,14 +81,14 @@ def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress
     show = progress and sys.stderr.isatty()
     with tempfile.TemporaryDirectory(prefix="fdi-sim-train-") as tmp:
         for i, seed in enumerate(seeds):
-            res = run(fault_free(sc, seed, duration_s), tmp, progress=False)
+            res = run(fault_free(sc, seed, duration_s), tmp, progress=False, keep_rows=True)
             if res.status == "interrupted":  # Ctrl-C / SIGTERM during calibration: stop like any run
                 raise KeyboardInterrupt(f"calibration interrupted during training flight seed {seed}")
             if res.status != "completed":
                 raise DesignError(f"{sc.source}: fault-free training flight seed {seed} ended {res.status} "
                                   f"({res.summary.reason}); a detector cannot be calibrated on a scenario that does not "
                                   "fly without its faults")
-            logs.append(read_log(res.log_path))
+            logs.append(res.rows)  # measurements and commands, kept in memory: no topic written or read back
             Path(res.log_path).unlink()
             if show:
                 el = time.perf_counter() - t0
@@ -260,7 +262,7 @@ def gust_kalman_calibration(sc: Scenario, model: Any, *, rate_hz: float = 20.0,
             seeds = training_seeds(n_flights)
             if training_logs is not None:
                 logs = list(training_logs)
-                flown = [float(lg.topics["/truth/state"].t_s[-1]) for lg in logs]
+                flown = [float(lg.topics[TOPIC_SENSORS].t_s[-1]) for lg in logs]
                 if len(logs) != n_flights or any(abs(f - duration_s) > 0.5 for f in flown):
                     raise DesignError(f"training_logs: {len(logs)} flights of {min(flown):g}-{max(flown):g} s given for "
                                       f"n_flights={n_flights} x duration_s={duration_s:g}")

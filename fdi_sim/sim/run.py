@@ -49,7 +49,9 @@ from fdi_sim.flightlog import (
     TOPIC_SIM_STATUS,
     TOPIC_SURFACES,
     TOPIC_TRUTH_STATE,
+    FlightLog,
     FlightLogWriter,
+    VectorTopic,
 )
 from fdi_sim.flightlog.records import MCAP_MAGIC
 from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimPoint
@@ -205,11 +207,52 @@ class RunSummary:
 
 @dataclass(frozen=True)
 class RunResult:
-    """The outcome of :func:`run`: where the log is, how the run ended, and its summary."""
+    """The outcome of :func:`run`: where the log is, how the run ended, and its summary.
+
+    ``rows`` is the in-memory log of a run flown with ``keep_rows`` (its measurement and
+    command topics only), None otherwise.
+    """
 
     log_path: Path
     status: str
     summary: RunSummary
+    rows: FlightLog | None = None
+
+
+class _NoRows:
+    """A per-step topic a training flight does not keep (truth, surfaces, operating point)."""
+
+    __slots__ = ()
+
+    def write(self, t_s: float, values: object) -> None:
+        pass
+
+
+class _Rows:
+    """A per-step vector topic kept in memory: row ``i`` is ``(t_s, *values)`` of the ``i``-th write.
+
+    The same float64 numbers the log's channel would hold (its CDR is ``float64`` throughout), so a
+    training flight's samples equal those read back from its MCAP log, bit for bit.
+    """
+
+    __slots__ = ("topic", "schema_name", "fields", "data", "i")
+
+    def __init__(self, topic: str, schema_name: str, fields: tuple[str, ...], n_rows: int) -> None:
+        self.topic, self.schema_name, self.fields = topic, schema_name, fields
+        self.data = np.empty((n_rows, len(fields)))
+        self.i = 0
+
+    def write(self, t_s: float, values: Sequence[float]) -> None:
+        d = self.data[self.i]
+        d[0] = t_s
+        d[1:] = values
+        self.i += 1
+
+    def topic_data(self) -> VectorTopic:
+        data = self.data[:self.i]
+        data.flags.writeable = False
+        return VectorTopic(self.topic, self.schema_name, self.fields, data,
+                           np.round(data[:, 0] * 1e9).astype(np.uint64))
 
 
 def component_seeds(seed: int) -> tuple[np.random.SeedSequence, ...]:
@@ -302,7 +345,8 @@ def bank_metadata(bank: FdiBank) -> dict[str, str]:
 
 
 def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | None = None,
-        progress: bool | None = None, force: bool = False, wall_limit_s: float | None = None) -> RunResult:
+        progress: bool | None = None, force: bool = False, wall_limit_s: float | None = None,
+        keep_rows: bool = False) -> RunResult:
     """Fly a scenario and write its MCAP log.
 
     Parameters
@@ -328,6 +372,11 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     RunResult
         ``summary.steps`` is the number of rows logged on ``/truth/state`` and ``summary.t_end_s``
         the time of the last one, whatever the ending.
+    keep_rows : bool
+        A training flight's log: the measurement and command topics are kept in memory
+        (``RunResult.rows``, as :func:`fdi_sim.flightlog.read_log` would read them back) and
+        no per-step topic is written to the file (a scenario with ``log.per_step = false`` keeps
+        none).
 
     Raises
     ------
@@ -373,6 +422,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     injector = None
     tr = None
     ch_truth = None
+    kept: list[_Rows] = []
     wall0 = time.perf_counter()
     timer = None
     with stop.installed():
@@ -414,7 +464,13 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             pilot = build_pilot(sc, tr, sensors.names)
             pilot.reset(np.random.default_rng(ss_pilot))
             ch_truth = ch_surf = ch_op = ch_cmd = ch_meas = None
-            if per_step:  # without: status, fault events and the FDI topics only, as a Monte Carlo run logs
+            if per_step and keep_rows:  # a training flight: only what its detector samples need, in memory
+                n_rows = int(round(sc.duration_s / sc.dt_s)) + 1
+                ch_truth = ch_surf = ch_op = _NoRows()
+                ch_cmd = _Rows(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS, n_rows)
+                ch_meas = _Rows(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names, n_rows)
+                kept = [ch_cmd, ch_meas]
+            elif per_step:  # without: status, fault events and the FDI topics only, as a Monte Carlo run logs
                 ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + truth_signals(sc.aircraft))
                 ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
                 ch_op = writer.add_vector_channel(TOPIC_OPERATING_POINT, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
@@ -482,7 +538,13 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         trim_throttle_norm=tr.throttle_cmd_norm if tr else math.nan,
         trim_alpha_deg=tr.alpha_rad * DEG_PER_RAD if tr else math.nan, **fdi,
     )
-    return RunResult(log_path=out, status=status, summary=summary)
+    rows = None
+    if keep_rows:
+        topics = {ch.topic: ch.topic_data() for ch in kept} if flying else {}
+        t_last = float(topics[TOPIC_SENSORS].t_s[-1]) if topics and len(topics[TOPIC_SENSORS]) else 0.0
+        rows = FlightLog(out, topics, {METADATA_SCENARIO: metadata[METADATA_SCENARIO]},
+                         {t: len(v) for t, v in topics.items()}, 0.0, t_last)
+    return RunResult(log_path=out, status=status, summary=summary, rows=rows)
 
 
 def _time_up(stop: StopRequest, limit_s: float) -> None:

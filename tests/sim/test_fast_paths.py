@@ -180,3 +180,24 @@ def test_core_cache_is_emptied_when_a_called_kernel_changes(tmp_path) -> None:
     assert stamp.read_text() == s2
     # the real one: the stamp beside the core's cache names the sensors' and the pilot's kernels
     assert {p.name for p in _core._DEPENDENCIES} == {"_kernels.py"} and len(_core._DEPENDENCIES) == 2
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_training_rows_in_memory_equal_the_log_read_back(name: str, tmp_path) -> None:
+    """A training flight's kept rows (``run(..., keep_rows=True)``, what calibrations train on) are
+    the measurement and command topics the same flight logs to its MCAP file, bit for bit, times
+    included; the file then holds no per-step topic."""
+    from fdi_sim.flightlog import TOPIC_COMMANDS, TOPIC_SENSORS, TOPIC_TRUTH_STATE, read_log
+    from fdi_sim.sim.run import run
+
+    sc = _scenario(name)
+    full = read_log(run(sc, log_path=tmp_path / "full.mcap", progress=False).log_path)
+    kept = run(sc, log_path=tmp_path / "kept.mcap", progress=False, keep_rows=True)
+    assert kept.status == "completed" and kept.rows is not None
+    assert set(kept.rows.topics) == {TOPIC_SENSORS, TOPIC_COMMANDS}
+    for topic in (TOPIC_SENSORS, TOPIC_COMMANDS):
+        a, b = full.topics[topic], kept.rows.topics[topic]
+        assert a.fields == b.fields and len(b) == int(round(sc.duration_s / sc.dt_s)) + 1
+        assert a.data.tobytes() == b.data.tobytes()
+        assert np.array_equal(a.log_time_ns, b.log_time_ns)
+    assert TOPIC_TRUTH_STATE in full.topics and TOPIC_TRUTH_STATE not in read_log(kept.log_path).topics
