@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Sequence
 
 from fdi_sim.errors import FdiSimError
+from fdi_sim.threads import one_blas_thread
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -227,7 +228,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = build_parser()
         args = parser.parse_args(argv)
         try:
-            return int(args.func(args) or 0)
+            with one_blas_thread():  # designs equal to a study worker's, bit for bit (fdi_sim.threads)
+                return int(args.func(args) or 0)
         except FdiSimError as exc:
             print(f"fdi-sim {args.command}: {exc}", file=sys.stderr)
             return 2

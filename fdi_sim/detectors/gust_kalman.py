@@ -49,6 +49,7 @@ from fdi_sim.detectors.samples import Samples, is_wrapped, paired_model
 from fdi_sim.errors import DesignError
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.linear.transform import discretize
+from fdi_sim.threads import single_blas_thread
 
 #: per-step random walk of the bias states, as a fraction of the turn-on spread
 DEFAULT_BIAS_DRIFT = 1e-3
@@ -137,6 +138,7 @@ class Calibration:
                    float(d["target_per_sample"]), int(d["n_samples"]), tuple(d.get("flights", ())))
 
 
+@single_blas_thread  # the same bits in a study worker and in a shell (fdi_sim.threads)
 def design_gust_kalman(model: LinearModel, *, rate_hz: float, sim_rate_hz: float = 120.0, turbulence: str = "moderate",
                        wingspan_ft: float, sensors: Mapping[str, SensorNoise], psiw_rad: float = 0.0,
                        bias_drift: float = DEFAULT_BIAS_DRIFT, window_s: float = 1.0, max_gain_s: float = 120.0
@@ -323,6 +325,7 @@ def settle_samples(design: GustKalmanDesign, settle_s: float = 2.0) -> int:
     return max(design.window_n, int(round(settle_s * design.rate_hz)))
 
 
+@single_blas_thread  # the same bits in a study worker and in a shell (fdi_sim.threads)
 def calibrate(design: GustKalmanDesign, flights: Sequence[Samples], target_per_sample: float,
               labels: Sequence[str] = ()) -> Calibration:
     """Measure ``Sigma_m`` and the empirical threshold on fault-free training flights.

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 import fdi_sim
 from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, PassJacobians, central_difference
 from fdi_sim.aircraft.linearize_response import N1_PROBE, STATE_PROBES, slope_jumps
+from fdi_sim.threads import single_blas_thread
 from fdi_sim.aircraft.fglin_replica import ReplicaLinearization, fglin_replica
 from fdi_sim.aircraft.linearize_fglin import JsbsimLinearization, fglinearization
 from fdi_sim.aircraft.linearize_state import (
@@ -554,6 +555,7 @@ def nonsmooth(ac: Aircraft, ts: TrimState, runs: DoubletRuns, model: LinearModel
 VALIDATED: tuple[str, ...] = ("zoh", "step")
 
 
+@single_blas_thread
 def linearize_grid(grid: GridSpec, settings: FDSettings | None = None, validate: bool = True,
                    methods: Sequence[str] = VALIDATED, check_fglin: bool | None = None,
                    progress: Callable[[int, int, SchedulePoint], None] | None = None) -> ModelSchedule:

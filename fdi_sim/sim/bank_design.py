@@ -31,6 +31,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from fdi_sim import __version__, registry
+from fdi_sim.threads import single_blas_thread
 from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
 from fdi_sim.units import S_PER_H
@@ -97,6 +98,7 @@ def per_sample_target(far_per_h: float, n_detectors: int, rate_hz: float) -> flo
     return float(far_per_h) / (max(1, n_detectors) * float(rate_hz) * S_PER_H)
 
 
+@single_blas_thread
 def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[str],
                sensor_rates_hz: dict[str, float], pilot_sensors: Sequence[str], progress: bool = True,
                training_logs: Sequence[Any] | None = None) -> Any:

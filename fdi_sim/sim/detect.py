@@ -31,6 +31,7 @@ from fdi_sim.flightlog import METADATA_SCENARIO, TOPIC_FAULT_EVENTS, fdi_topic, 
 from fdi_sim.flightlog.copy import NewEventTopic, NewVectorTopic, write_extended
 from fdi_sim.flightlog.reader import FlightLog
 from fdi_sim.flightlog.schemas import ALARM_JSON_SCHEMA, TOPIC_FDI_ALARMS
+from fdi_sim.threads import single_blas_thread
 from fdi_sim.units import S_PER_H
 
 DEFAULT_RATE_HZ = 20.0
@@ -236,6 +237,7 @@ def model_for_scenario(sc: Any, rate_hz: float) -> LogModel:
     return LogModel(sc, sched, paired_model(found.model, float(sc.model.rate_hz)), sc.aircraft)
 
 
+@single_blas_thread
 def build_detector(spec: DetectorSpec, model: Any) -> Any:
     """Design one registered detector from ``model``; unknown options get a "did you mean"."""
     check_options(spec)
