@@ -147,3 +147,17 @@ def test_missing_signal_and_bad_design_are_named() -> None:
         design("atitude")
     with pytest.raises(DesignError, match="1000 samples"):
         empirical_threshold([np.zeros(10)], 1e-3)
+
+
+def test_euler_inverse_in_closed_form_solves_the_euler_rate_matrix() -> None:
+    """``euler_inverse_apply`` (the attitude check's ``E^-1 e``, closed form so that every CPU and
+    BLAS rounds it alike) solves ``E b = e`` for random attitudes up to +-85 deg of pitch."""
+    from fdi_sim.detectors.kinematic import _euler_matrix, euler_inverse_apply
+
+    rng = np.random.default_rng(7)
+    n = 5000
+    phi, theta = rng.uniform(-np.pi, np.pi, n), rng.uniform(-1.48, 1.48, n)
+    e = rng.normal(size=(n, 3))
+    b = euler_inverse_apply(phi, theta, e)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", _euler_matrix(phi, theta), b), e, rtol=0, atol=1e-12 / np.cos(1.48))
+    np.testing.assert_allclose(b, np.linalg.solve(_euler_matrix(phi, theta), e[:, :, None])[:, :, 0], rtol=1e-9, atol=1e-9)
