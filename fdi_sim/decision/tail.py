@@ -174,8 +174,8 @@ def _runs(m: NDArray[np.float64], u: float) -> tuple[NDArray[np.float64], int]:
 class _Crossings:
     """One flight's upcrossings of every level at once: the series ``m`` upcrosses ``x`` at sample
     ``j`` when ``m[j-1] <= x < m[j]`` (``m[-1] = -inf``: a flight that starts above ``x`` starts an
-    episode), so the count at ``x`` is the number of intervals ``[m[j-1], m[j])`` holding it, two
-    binary searches in their sorted ends."""
+    episode), so the count at ``x`` is the number of intervals ``[m[j-1], m[j])`` holding it: the
+    sorted interval ends ``lo`` and ``hi`` (counted for many flights at once by :class:`_Pool`)."""
 
     def __init__(self, m: NDArray[np.float64]) -> None:
         self.m = np.asarray(m, float)
@@ -185,9 +185,6 @@ class _Crossings:
         fin = self.m[np.isfinite(self.m)]
         self.top = float(fin.max()) if fin.size else -np.inf
         self.finite = fin
-
-    def count(self, x: float) -> int:
-        return int(np.searchsorted(self.lo, x, "right") - np.searchsorted(self.hi, x, "right"))
 
 
 class _Pool:

@@ -34,7 +34,6 @@ from numpy.typing import NDArray
 import fdi_sim
 from fdi_sim.aircraft.linearize import BodyJacobians, FDSettings, PassJacobians, central_difference
 from fdi_sim.aircraft.linearize_response import N1_PROBE, STATE_PROBES, slope_jumps
-from fdi_sim.threads import single_blas_thread
 from fdi_sim.aircraft.fglin_replica import ReplicaLinearization, fglin_replica
 from fdi_sim.aircraft.linearize_fglin import JsbsimLinearization, fglinearization
 from fdi_sim.aircraft.linearize_state import (
@@ -53,6 +52,7 @@ from fdi_sim.linear.validate import (
     expseek, fly_doublets, lag_row,
 )
 from fdi_sim.operating_point import OperatingPoint
+from fdi_sim.threads import single_blas_thread
 from fdi_sim.units import KT_PER_FPS
 
 #: trim-status passes per evaluation that settle the F-16 FBW in FGLinearization's procedure

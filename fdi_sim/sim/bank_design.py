@@ -31,9 +31,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from fdi_sim import __version__, registry
-from fdi_sim.threads import single_blas_thread
 from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
+from fdi_sim.threads import single_blas_thread
 from fdi_sim.units import S_PER_H
 
 

@@ -219,34 +219,29 @@ class RunResult:
     rows: FlightLog | None = None
 
 
-class _NoRows:
-    """A per-step topic a training flight does not keep (truth, surfaces, operating point)."""
-
-    __slots__ = ()
-
-    def write(self, t_s: float, values: object) -> None:
-        pass
-
-
 class _Rows:
     """A per-step vector topic kept in memory: row ``i`` is ``(t_s, *values)`` of the ``i``-th write.
 
     The same float64 numbers the log's channel would hold (its CDR is ``float64`` throughout), so a
-    training flight's samples equal those read back from its MCAP log, bit for bit.
+    training flight's samples equal those read back from its MCAP log, bit for bit. The row views
+    are made once (12 ms for 36 000 rows): a write builds no object (0.29 us, against 0.71 us when
+    each write sliced its row).
     """
 
-    __slots__ = ("topic", "schema_name", "fields", "data", "i")
+    __slots__ = ("topic", "schema_name", "fields", "data", "_t_s", "_rows", "i")
 
     def __init__(self, topic: str, schema_name: str, fields: tuple[str, ...], n_rows: int) -> None:
         self.topic, self.schema_name, self.fields = topic, schema_name, fields
         self.data = np.empty((n_rows, len(fields)))
+        self._t_s = self.data[:, 0]
+        self._rows = [self.data[i, 1:] for i in range(n_rows)]
         self.i = 0
 
     def write(self, t_s: float, values: Sequence[float]) -> None:
-        d = self.data[self.i]
-        d[0] = t_s
-        d[1:] = values
-        self.i += 1
+        i = self.i
+        self._t_s[i] = t_s
+        self._rows[i][...] = values
+        self.i = i + 1
 
     def topic_data(self) -> VectorTopic:
         data = self.data[:self.i]
@@ -366,17 +361,17 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         Wall-clock limit of the flight [s] (a Monte Carlo study's per-run limit): when it passes,
         the run ends between two steps as if stopped, status ``interrupted``, reason
         ``wall-clock limit ...``. Works in any thread (a timer sets the stop flag).
+    keep_rows : bool
+        A training flight's log: the measurement and command topics are kept in memory
+        (``RunResult.rows``, as :func:`fdi_sim.flightlog.read_log` would read them back) and
+        no per-step topic is written to the file (a scenario with ``log.per_step = false`` keeps
+        none).
 
     Returns
     -------
     RunResult
         ``summary.steps`` is the number of rows logged on ``/truth/state`` and ``summary.t_end_s``
         the time of the last one, whatever the ending.
-    keep_rows : bool
-        A training flight's log: the measurement and command topics are kept in memory
-        (``RunResult.rows``, as :func:`fdi_sim.flightlog.read_log` would read them back) and
-        no per-step topic is written to the file (a scenario with ``log.per_step = false`` keeps
-        none).
 
     Raises
     ------
@@ -464,18 +459,18 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             pilot = build_pilot(sc, tr, sensors.names)
             pilot.reset(np.random.default_rng(ss_pilot))
             ch_truth = ch_surf = ch_op = ch_cmd = ch_meas = None
+            cmd_spec = (TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
+            meas_spec = (TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
             if per_step and keep_rows:  # a training flight: only what its detector samples need, in memory
                 n_rows = int(round(sc.duration_s / sc.dt_s)) + 1
-                ch_truth = ch_surf = ch_op = _NoRows()
-                ch_cmd = _Rows(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS, n_rows)
-                ch_meas = _Rows(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names, n_rows)
+                # truth, surfaces and operating point stay None: the loop neither reads nor builds them
+                ch_cmd, ch_meas = _Rows(*cmd_spec, n_rows), _Rows(*meas_spec, n_rows)
                 kept = [ch_cmd, ch_meas]
             elif per_step:  # without: status, fault events and the FDI topics only, as a Monte Carlo run logs
                 ch_truth = writer.add_vector_channel(TOPIC_TRUTH_STATE, "fdi_sim/msg/TruthState", ("t_s",) + truth_signals(sc.aircraft))
                 ch_surf = writer.add_vector_channel(TOPIC_SURFACES, "fdi_sim/msg/Surfaces", ("t_s",) + SURFACE_SIGNALS)
                 ch_op = writer.add_vector_channel(TOPIC_OPERATING_POINT, "fdi_sim/msg/OperatingPoint", ("t_s",) + OP_SIGNALS)
-                ch_cmd = writer.add_vector_channel(TOPIC_COMMANDS, "fdi_sim/msg/PilotCommands", ("t_s",) + PILOT_FIELDS)
-                ch_meas = writer.add_vector_channel(TOPIC_SENSORS, "fdi_sim/msg/Measurements", ("t_s",) + sensors.names)
+                ch_cmd, ch_meas = writer.add_vector_channel(*cmd_spec), writer.add_vector_channel(*meas_spec)
             ch_status = writer.add_event_channel(TOPIC_SIM_STATUS, "fdi_sim/msg/SimStatus", STATUS_JSON_SCHEMA)
             ch_status.write(0.0, {"status": "running", "message": f"trimmed ({tr.method} trim), flying"})
             fault_channels = None
@@ -541,9 +536,9 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     rows = None
     if keep_rows:
         topics = {ch.topic: ch.topic_data() for ch in kept} if flying else {}
-        t_last = float(topics[TOPIC_SENSORS].t_s[-1]) if topics and len(topics[TOPIC_SENSORS]) else 0.0
+        t_last_s = float(topics[TOPIC_SENSORS].t_s[-1]) if topics and len(topics[TOPIC_SENSORS]) else 0.0
         rows = FlightLog(out, topics, {METADATA_SCENARIO: metadata[METADATA_SCENARIO]},
-                         {t: len(v) for t, v in topics.items()}, 0.0, t_last)
+                         {t: len(v) for t, v in topics.items()}, 0.0, t_last_s)
     return RunResult(log_path=out, status=status, summary=summary, rows=rows)
 
 
@@ -611,11 +606,13 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     on lists (the injector's contract) and uses the core for the truth and the statistics.
 
     ``steps`` counts the steps whose measurements, commands and (with ``per_step``) log rows are
-    complete: rows 0 .. steps-1. With a bank, every detector sample ``j`` is taken at step ``j n``
+    complete: rows 0 .. steps-1. A training flight (``run(keep_rows=True)``) passes no truth,
+    surface and operating-point channels: their rows are then neither read nor built. With a bank, every detector sample ``j`` is taken at step ``j n``
     (module :mod:`fdi_sim.sim.bank`): the measurement row before the pilot, the command row after
     it, the block run before the pilot of its last step (so a reconfiguration acts on that step).
     """
     ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
+    log_state = per_step and ch_truth is not None  # the truth, surface and operating-point topics
     ch_ftruth, ch_fevents, ch_valid = fault_channels if fault_channels else (None, None, None)
     # one compiled call a step (module fdi_sim.sim._core): the JSBSim properties are read flat (the
     # AGL altitude last) and packed behind the truth in x_buf, which the kernels see as x_arr; the
@@ -697,7 +694,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 code = core(TRUTH, t_s, x_arr, y_buf, u_row, s_tab, s_off, p_state, p_par, aux)
             if code:
                 raise SimulationDiverged(t_s, _core.divergence_reason(code, x_truth.tolist(), truth_names, lim))
-            xl = x_truth.tolist() if per_step or inj is not None else None
+            xl = x_truth.tolist() if log_state or inj is not None else None
             if inj is not None:
                 y = measure(t_s, xl)
                 inj.begin_step(t_s)
@@ -735,15 +732,17 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 u_row[:] = cmd
                 core(STATS, t_s, x_arr, y_buf, u_row, s_tab, s_off, p_state, p_par, aux)
             # --- log ------------------------------------------------------------------------
-            if per_step:
-                ch_truth.write(t_s, xl)
+            if per_step:  # the order of the writes is the log's record order
+                if log_state:
+                    ch_truth.write(t_s, xl)
                 ch_meas.write(t_s, y)
                 if inj is not None:
                     ch_ftruth.write(t_s, inj.truth_row())
                     if ch_valid is not None:
                         ch_valid.write(t_s, inj.valid)
                 ch_cmd.write(t_s, cmd)
-                ch_op.write(t_s, (xl[i_h], xl[i_vc], xl[i_mach], xl[i_alpha], flaps_deg, eta))
+                if log_state:
+                    ch_op.write(t_s, (xl[i_h], xl[i_vc], xl[i_mach], xl[i_alpha], flaps_deg, eta))
             if inj is not None and inj.events:
                 for te, ev in inj.pop_events():
                     ch_fevents.write(te, ev)
@@ -752,7 +751,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 break
             if not step_jsbsim():
                 raise SimulationDiverged(t_s, "JSBSim stopped the run")
-            if per_step:
+            if log_state:
                 ch_surf.write(t_s, read_surf())
             if bar is not None and k - last_shown >= 120:
                 bar.update((k - last_shown) * dt)

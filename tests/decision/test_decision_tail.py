@@ -119,11 +119,17 @@ def _episodes(flights, x):
 
 
 def test_crossing_counts_are_the_alarm_episodes():
-    from fdi_sim.decision.tail import _Crossings, _runs
+    """The pooled upcrossing count (what the threshold fit bisects on) is the number of alarm
+    episodes, counted directly and by runs, with every flight once and with bootstrap weights."""
+    from fdi_sim.decision.tail import _Crossings, _Pool, _runs
 
     fl = _ar1_flights(np.random.default_rng(6), 5)
+    pool = _Pool([_Crossings(m) for m in fl])
+    w = np.array([0, 2, 1, 3, 1])
     for x in (0.5, 1.0, 2.0, 3.0):
-        assert sum(_Crossings(m).count(x) for m in fl) == _episodes(fl, x) == sum(_runs(m, x)[1] for m in fl)
+        assert pool.counter(np.ones(len(fl), dtype=np.int64)).count(x) == _episodes(fl, x) == \
+            sum(_runs(m, x)[1] for m in fl)
+        assert pool.counter(w).count(x) == sum(int(wi) * _episodes([m], x) for m, wi in zip(fl, w))
 
 
 def test_episode_threshold_holds_on_held_out_flights():
