@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 from typing import Sequence
 
+from fdi_sim import signals
 from fdi_sim.errors import FdiSimError
 from fdi_sim.threads import one_blas_thread
 
@@ -216,6 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _terminate(signum: int, _frame: object) -> None:
+    # recorded first: the exception can be dropped (raised inside a weakref callback; fdi_sim.signals)
+    signals.request("stopped by SIGTERM")
     raise KeyboardInterrupt  # SIGTERM ends a command like Ctrl-C (a run installs its own handler)
 
 

@@ -27,7 +27,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from fdi_sim import registry
+from fdi_sim import registry, signals
 from fdi_sim.aircraft import (
     COMMAND_SIGNALS, SURFACE_SIGNALS, Aircraft, Atmosphere, TrimResult, hold_trim_in_wind, trim,
 )
@@ -124,6 +124,8 @@ class StopRequest:
         before = {s: signal.getsignal(s) for s in _SIGNAL_REASONS}
         for s in _SIGNAL_REASONS:
             signal.signal(s, self._handle)
+        if signals.pending_reason:  # a signal before this handler whose exception was dropped
+            self.requested, self.reason = True, self.reason or signals.pending_reason
         try:
             yield self
         finally:
