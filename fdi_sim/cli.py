@@ -12,7 +12,7 @@ import signal
 import sys
 import threading
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from fdi_sim import signals
 from fdi_sim.errors import FdiSimError
@@ -216,17 +216,31 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _terminate(signum: int, _frame: object) -> None:
+def _stop(signum: int, _frame: object) -> None:
     # recorded first: the exception can be dropped (raised inside a weakref callback; fdi_sim.signals)
-    signals.request("stopped by SIGTERM")
+    signals.request(signals.REASONS[signum])
     raise KeyboardInterrupt  # SIGTERM ends a command like Ctrl-C (a run installs its own handler)
+
+
+def _install_stop_handlers() -> dict[int, Any]:
+    """SIGINT and SIGTERM -> :func:`_stop`; returns the handlers to restore (main thread only).
+
+    A SIGINT that the process was started ignoring (a command run with ``&`` from a script) stays
+    ignored: the Unix convention (a run's own handler still catches it during the flight).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    before = {s: signal.getsignal(s) for s in signals.REASONS}
+    for s in signals.REASONS:
+        if not (s == signal.SIGINT and before[s] == signal.SIG_IGN):
+            signal.signal(s, _stop)
+    return before
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """The command line; returns the exit code (0 ok, 1 diverged/interrupted/damaged, 2 bad input)."""
-    before = signal.getsignal(signal.SIGTERM)
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _terminate)
+    signals.clear()  # a new command (main() is also called in-process, by tests and scripts)
+    before = _install_stop_handlers()
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
@@ -244,8 +258,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fdi-sim: {str(exc) or 'interrupted'}", file=sys.stderr)
         return 1
     finally:
-        if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGTERM, before if before is not None else signal.SIG_DFL)
+        for s, h in before.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
 
 
 #: set when main() caught a KeyboardInterrupt (see :func:`entry`)

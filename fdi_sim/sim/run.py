@@ -84,7 +84,7 @@ class RunInterrupted(KeyboardInterrupt):
         super().__init__(f"{reason} before the flight started: no log written ({log_path} left as it was)")
 
 
-_SIGNAL_REASONS = {signal.SIGINT: "stopped by the user (Ctrl-C, SIGINT)", signal.SIGTERM: "stopped by SIGTERM"}
+_SIGNAL_REASONS = signals.REASONS
 
 
 class StopRequest:

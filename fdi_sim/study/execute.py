@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fdi_sim import signals
 from fdi_sim.errors import StudyError
 from fdi_sim.study.spec import Study, design_groups, scenario_toml
 from fdi_sim.units import S_PER_H
@@ -394,7 +395,11 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
                 raise StudyError(study.source, "bank", f"the bank cannot be designed: {r['error']}",
                                  "fix the bank section or the sampled point (or bank.on_design_failure = \"skip\")")
         alarms = 0
+        if signals.stop_requested():
+            raise KeyboardInterrupt
         for fut in as_completed(futures, loop=client.loop):
+            if signals.stop_requested():  # a Ctrl-C or SIGTERM whose exception was dropped (fdi_sim.signals)
+                raise KeyboardInterrupt
             try:
                 res = fut.result()
             except Exception as exc:  # a worker lost too often, a task cancelled: not the flight's fault
