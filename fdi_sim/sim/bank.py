@@ -242,6 +242,11 @@ class _Member:
         self._full = tuple(a[:S] for a in self._arrays)
         self.reset()
 
+    @property
+    def threshold(self) -> float:
+        """The alarm threshold on the statistic [-] (:meth:`set_threshold`)."""
+        return float(self.stream._thr[0]) if self.kind == "gust" else float(self.stream.threshold)
+
     def set_threshold(self, value: float) -> None:
         """The alarm threshold on the statistic (every schedule point alike: each point's statistic
         is normalized by its own covariance)."""

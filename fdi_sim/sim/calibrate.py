@@ -327,6 +327,14 @@ class StudyMemberThreshold:
         The member's share of the bank's rate [1/h].
     calibration, held_out : HeldRate
         On the calibration half at ``threshold``, and on the held-out half.
+    method : str
+        How the threshold was set on the calibration half (the tail fit's description).
+    rate_ratio : float
+        Held-out rate over the calibration half's at ``threshold`` [-] (inf when that half has none).
+    rate_ratio_ci : tuple of float
+        Its exact conditional interval, scaled by the runs' dispersion [-].
+    consistent : bool
+        1 lies in ``rate_ratio_ci``: the two halves agree, allowing for both counts' sampling error.
     """
 
     id: str
@@ -336,6 +344,10 @@ class StudyMemberThreshold:
     target_per_h: float
     calibration: HeldRate
     held_out: HeldRate
+    method: str
+    rate_ratio: float
+    rate_ratio_ci: tuple[float, float]
+    consistent: bool
 
 
 @dataclass(frozen=True)
@@ -405,7 +417,8 @@ class StudyThresholds:
         return (f"calibration study {self.study} ({self.runs} runs, {self.flight_h:.1f} h), held-out rate "
                 f"{h.far_per_h:.3g} per h [{h.ci_per_h[0]:.3g}, {h.ci_per_h[1]:.3g}] ({h.false_alarms} in "
                 f"{h.exposure_h:.1f} h, target {m.target_per_h:.3g}; calibrated on the {self.split} runs: "
-                f"{m.calibration.false_alarms} in {m.calibration.exposure_h:.1f} h; study {self.study_identity})")
+                f"{m.calibration.false_alarms} in {m.calibration.exposure_h:.1f} h, rate ratio "
+                f"[{m.rate_ratio_ci[0]:.3g}, {m.rate_ratio_ci[1]:.3g}]; study {self.study_identity}; {m.method})")
 
 
 def _strict(cls: type, d: Any, source: str, where: str) -> dict[str, Any]:
@@ -449,6 +462,8 @@ def thresholds_to_dict(t: StudyThresholds) -> dict[str, Any]:
     d = {"kind": THRESHOLDS_KIND, **d}
     for h in [d["bank_calibration"], d["bank_held_out"]] + [x for m in d["members"] for x in (m["calibration"], m["held_out"])]:
         h["ci_per_h"] = list(h["ci_per_h"])
+    for m in d["members"]:
+        m["rate_ratio_ci"] = list(m["rate_ratio_ci"])
     d["members"] = list(d["members"])
     return d
 
@@ -504,7 +519,8 @@ def read_thresholds(path: str | Path) -> StudyThresholds:
         members.append(StudyMemberThreshold(
             str(m["id"]), float(m["threshold"]), float(m["trained_threshold"]), float(m["scale"]),
             float(m["target_per_h"]), _held(m["calibration"], src, f"members[{i}].calibration"),
-            _held(m["held_out"], src, f"members[{i}].held_out")))
+            _held(m["held_out"], src, f"members[{i}].held_out"), str(m["method"]), float(m["rate_ratio"]),
+            (float(m["rate_ratio_ci"][0]), float(m["rate_ratio_ci"][1])), bool(m["consistent"])))
     try:
         return StudyThresholds(
             str(d["aircraft"]), str(d["study"]), str(d["study_identity"]), int(d["runs"]), float(d["flight_h"]),
