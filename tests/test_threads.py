@@ -46,3 +46,21 @@ def test_one_and_two_blas_threads_design_the_same_bits() -> None:
     one, two = _design(1), _design(2)
     assert (one["threads"], two["threads"]) == (1, 2)  # the processes really differ in threads
     assert {k: one[k] for k in ("A", "C", "gain")} == {k: two[k] for k in ("A", "C", "gain")}
+
+
+def test_a_local_cluster_leaves_the_client_environment_alone(monkeypatch) -> None:
+    """Dask's nannies put ``OPENBLAS_NUM_THREADS=1`` (their pre-spawn environment) into the client's
+    ``os.environ``; a subprocess started afterwards inherited it (session 10). A real local cluster
+    of one worker, started and closed: the environment is as before."""
+    from fdi_sim.study.execute import _client
+
+    for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(k, raising=False)
+    before = dict(os.environ)
+    client, cluster = _client(1, None)
+    try:
+        assert client.submit(os.getenv, "OPENBLAS_NUM_THREADS").result(timeout=60) == "1"  # the worker has it
+        assert dict(os.environ) == before  # the client does not
+    finally:
+        client.close()
+        cluster.close()

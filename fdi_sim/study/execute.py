@@ -31,6 +31,7 @@ failure: flying it again would fail again), one over ``time_limit_s`` as ``timeo
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -40,7 +41,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from fdi_sim import signals
 from fdi_sim.errors import StudyError
@@ -300,10 +301,27 @@ def _client(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
                              "start one (`dask scheduler`, then `dask worker ADDRESS --nthreads 1` per core) "
                              "or leave out --scheduler to use a local cluster") from None
     n = int(workers) if workers else (os.cpu_count() or 1)
-    with dask.config.set({"distributed.scheduler.allowed-failures": 3}):
+    with dask.config.set({"distributed.scheduler.allowed-failures": 3}), _environ_kept():
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                                silence_logs=logging.ERROR)
     return Client(cluster, set_as_default=False), cluster
+
+
+@contextlib.contextmanager
+def _environ_kept() -> Iterator[None]:
+    """Restore the client's environment after Dask's nannies start: they apply their
+    ``pre-spawn-environ`` (``OMP/MKL/OPENBLAS_NUM_THREADS=1``) to this process's ``os.environ`` and
+    leave it there, so a subprocess started afterwards (``fdi-sim study --calibrate`` in a test)
+    inherited one BLAS thread (measured in session 10: None before the cluster, "1" after)."""
+    before = dict(os.environ)
+    try:
+        yield
+    finally:
+        for k in set(os.environ) - set(before):
+            del os.environ[k]
+        for k, v in before.items():
+            if os.environ.get(k) != v:
+                os.environ[k] = v
 
 
 def fly_study(study: Study, out_dir: str | Path, *, workers: int | None = None, scheduler: str | None = None,
