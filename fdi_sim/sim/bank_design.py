@@ -158,7 +158,7 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
 # --- thresholds from a calibration study ------------------------------------------------------------
 #: ``[fdi] thresholds = "default"`` per aircraft: "trained" (the bank's own training flights) or
 #: "shipped" (:func:`shipped_thresholds_path`, where it covers the bank's design; trained elsewhere)
-DEFAULT_THRESHOLDS: dict[str, str] = {"f16": "trained", "DHC6": "shipped"}
+DEFAULT_THRESHOLDS: dict[str, str] = {"f16": "shipped", "DHC6": "shipped"}
 
 
 def shipped_thresholds_path(aircraft: str) -> Path:
