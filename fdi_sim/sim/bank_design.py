@@ -293,7 +293,7 @@ def apply_study_thresholds(sc: Scenario, bank: Any, path: Path, *, explicit: boo
                 if rel[worst] <= TRAINED_MATCH_REL:
                     bad = []
                     matched = (f"trained thresholds within {rel[worst]:.2%} of the file's (design hash {h}, the "
-                               f"file's {t.design_hash}: another CPU's rounding)")
+                               f"file's {t.design_hash}: another CPU's rounding, or a design change too small to move them)")
                 else:
                     bad = [(f"{t.members[worst].id} trained threshold", t.members[worst].trained_threshold,
                             f"{bank.members[worst].threshold} ({rel[worst]:.1%} apart, more than "
