@@ -1,8 +1,8 @@
 """Foxglove's own libraries decode every topic of our logs exactly as ``read_log`` does.
 
-The shipped scenarios are flown shortened (8 s) through the CLI (the ten with an ``[fdi]`` table
+The shipped scenarios are flown shortened (20 s) through the CLI (the ten with an ``[fdi]`` table
 fly the default bank in the loop: ``/fdi/<id>/statistic|residual|estimate``, ``/fdi/alarms``,
-``/fdi/failure_log``, ``/fdi/reconfiguration``), the pitch-gyro bias once more for 14 s so the bank
+``/fdi/failure_log``, ``/fdi/reconfiguration``), the pitch-gyro bias once more (20 s) so the bank
 alarms, isolates and reconfigures (those event channels carry payloads), one log is run through
 ``fdi-sim detect`` (``/fdi/offline/...``), and each log is decoded by
 ``tools/foxglove/decode.mjs`` with node: ``@mcap/core`` (indexed reader, zstd/lz4 through
@@ -42,10 +42,10 @@ from fdi_sim.flightlog import (
 ROOT = Path(__file__).resolve().parents[2]
 TOOL = ROOT / "tools" / "foxglove"
 DECODE = TOOL / "decode.mjs"
-DURATION_S = 8.0
+DURATION_S = 20.0  # the length test_scenarios_run and the review tests fly: the same bank designs (a shorter run drops later maneuvers and designs its own bank)
 #: every shipped scenario, flown shortened; the dropout variant adds a /sensors/valid topic
 SCENARIOS = tuple(sorted(f.stem for f in (ROOT / "scenarios").glob("*.toml")))
-#: no shipped scenario has a sensor dropout within 8 s, so one is added to a shipped file
+#: no shipped scenario has a sensor dropout, so one is added to a shipped file
 DROPOUT_FAULT = """
 [[faults]]
 type = "sensor-dropout-v1"
@@ -56,8 +56,8 @@ intermittent = { windows_s = [[2.0, 3.0], [5.0, 6.5]] }
 DETECTOR = "kalman-nis-v1:sensor_std=0.01"
 #: a bank scenario flown long enough for its bank to alarm (11.05 s), log failures and reconfigure (11.5 s)
 ALARMED = "f16_pitch_gyro_bias"
-ALARMED_S = 14.0
-#: the shipped scenarios with an [fdi] table: their 8 s logs hold the bank's topics
+ALARMED_S = 20.0
+#: the shipped scenarios with an [fdi] table: their logs hold the bank's topics
 BANK_SCENARIOS = tuple(name for name in SCENARIOS
                        if "\n[fdi]" in (ROOT / "scenarios" / f"{name}.toml").read_text())
 
@@ -92,7 +92,7 @@ _FLOWN: dict[str, Path] = {}
 
 
 def shipped_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """The shipped scenarios flown for 8 s, the gyro bias for ``ALARMED_S`` (key ``"alarmed"``),
+    """The shipped scenarios flown for ``DURATION_S``, the gyro bias for ``ALARMED_S`` (key ``"alarmed"``),
     a dropout variant and a ``detect`` output log; flown once per test session (shared by the xdist
     workers, ``tests/flown_once.py``).
 
