@@ -143,12 +143,16 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
     p = per_sample_target(f.far_per_h, len(streams), f.rate_hz)
     path, explicit = thresholds_source(sc)
     if path is not None:
-        def retrain() -> None:  # the bank's trained thresholds (cached): the file's match on another CPU
-            calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
+        trained: list[bool] = []
+
+        def retrain() -> None:  # the bank's trained thresholds, once (the file's match on another CPU)
+            if not trained:
+                calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
+                trained.append(True)
 
         note = apply_study_thresholds(sc, bank, path, explicit=explicit, retrain=retrain)
         if note is None:  # the default's file does not cover this design: trained, and the log says why
-            calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
+            retrain()
             bank.calibration = {**bank.calibration, "source": "trained", "note": note_no_match(sc, path)}
     else:
         calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)

@@ -84,9 +84,6 @@ class RunInterrupted(KeyboardInterrupt):
         super().__init__(f"{reason} before the flight started: no log written ({log_path} left as it was)")
 
 
-_SIGNAL_REASONS = signals.REASONS
-
-
 class StopRequest:
     """SIGINT and SIGTERM during a run: an exception before the flight, a flag during it.
 
@@ -108,7 +105,7 @@ class StopRequest:
         self._flying = True
 
     def _handle(self, signum: int, _frame: object) -> None:
-        self.reason = self.reason or _SIGNAL_REASONS.get(signum, f"stopped by signal {signum}")
+        self.reason = self.reason or signals.REASONS.get(signum, f"stopped by signal {signum}")
         # the flag first: a KeyboardInterrupt raised while C++ calls back into Python (JSBSim's
         # logger during the trim) can be swallowed there; run() checks the flag before take-off
         self.requested = True
@@ -121,10 +118,10 @@ class StopRequest:
         if threading.current_thread() is not threading.main_thread():
             yield self
             return
-        before = {s: signal.getsignal(s) for s in _SIGNAL_REASONS}
-        for s in _SIGNAL_REASONS:
+        before = {s: signal.getsignal(s) for s in signals.REASONS}
+        for s in signals.REASONS:
             signal.signal(s, self._handle)
-        if signals.pending_reason:  # a signal before this handler whose exception was dropped
+        if signals.stop_requested():  # a signal before this handler whose exception was dropped
             self.requested, self.reason = True, self.reason or signals.pending_reason
         try:
             yield self

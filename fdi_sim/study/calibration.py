@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -207,9 +207,7 @@ def tail_calibrate_threshold(records: Sequence[Mapping[str, Any]], out_dir: str 
         s_star, how = confident_episode_threshold(series, target_per_h, hours, rng, level=level)
     except DesignError as exc:
         cal = calibrate_threshold(records, out_dir, detector, target_per_h, k=k, n=n, grace_s=grace_s)
-        return Calibration(cal.detector, cal.target_per_h, cal.scale, cal.false_alarms, cal.exposure_h,
-                           cal.far_per_h, cal.runs, cal.threshold_median,
-                           f"count (too few episodes for a tail fit: {exc}): {CALIBRATION_METHOD}")
+        return replace(cal, method=f"count (too few episodes for a tail fit: {exc}): {CALIBRATION_METHOD}")
     s_star *= 1.0 + SCALE_NUDGE
     count = int(rescore(list(records), out_dir, [s_star], k=k, n=n, grace_s=grace_s).detectors[detector].false_alarms[0])
     expo_h = float(sum(hours))
