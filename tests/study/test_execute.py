@@ -348,6 +348,6 @@ def test_tail_calibration_on_half_is_not_beaten_on_the_other_half(dhc6, detector
           f"{chk.false_alarms} in {chk.exposure_h:.3f} h = {chk.far_per_h:.2f} per h "
           f"[{chk.far_per_h_ci[0]:.2f}, {chk.far_per_h_ci[1]:.2f}]")
     assert cal.method.startswith("episode tail") and "GPD" in cal.method  # extrapolated, not the count
-    assert chk.calibration is cal and chk.calibration_false_alarms == cal.false_alarms
+    assert chk.calibration_false_alarms == cal.false_alarms  # the check counts what the calibration counted
     assert chk.far_per_h_ci[0] <= target, chk
     assert chk.consistent, chk
