@@ -66,7 +66,13 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
         if spec.kind != kind:
             kind = spec.kind
             print(f"[{kind}]")
-        print(f"  {spec.id:26} {spec.summary}")
+        origin = "" if spec.origin == "fdi-sim" else f"  [plugin: {spec.origin}]"
+        print(f"  {spec.id:26} {spec.summary}{origin}")
+    broken = registry.broken_plugins()
+    if broken:
+        print("[refused plugins]")
+        for b in broken:
+            print(f"  {b.id:26} {b.kind} from {b.origin}: {b.reason}")
     return 0
 
 

@@ -31,6 +31,8 @@ class PluginSpec:
         Builds the plugin from its scenario parameters.
     params : Any
         The pydantic model (or dataclass) the scenario section is validated against, or None.
+    origin : str
+        ``"fdi-sim"`` for a built-in, else the distribution that registered it (an entry point).
     """
 
     kind: str
@@ -38,6 +40,7 @@ class PluginSpec:
     summary: str
     factory: Callable[..., Any]
     params: Any = None
+    origin: str = "fdi-sim"
 
 
 _REGISTRY: dict[str, dict[str, PluginSpec]] = {k: {} for k in KINDS}
@@ -50,14 +53,15 @@ def _table(kind: str) -> dict[str, PluginSpec]:
     return table
 
 
-def register(kind: str, id: str, summary: str, factory: Callable[..., Any], params: Any = None) -> PluginSpec:
+def register(kind: str, id: str, summary: str, factory: Callable[..., Any], params: Any = None,
+             origin: str = "fdi-sim") -> PluginSpec:
     """Add a plugin to the catalogue; a duplicate id raises :class:`RegistryError`."""
     table = _table(kind)
     if not _valid_id(id):
         raise RegistryError(f"plugin id {id!r} must look like 'name-v1' (lower case, versioned)")
     if id in table:
-        raise RegistryError(f"{kind} id {id!r} is already registered")
-    spec = PluginSpec(kind=kind, id=id, summary=summary, factory=factory, params=params)
+        raise RegistryError(f"{kind} id {id!r} is already registered (by {table[id].origin})")
+    spec = PluginSpec(kind=kind, id=id, summary=summary, factory=factory, params=params, origin=origin)
     table[id] = spec
     return spec
 
@@ -71,6 +75,9 @@ def get(kind: str, id: str) -> PluginSpec:
     """Look a plugin up; an unknown id raises with the closest known ids."""
     load_builtin_plugins()
     table = _table(kind)
+    if id not in table and (kind, id) in _BROKEN:
+        b = _BROKEN[(kind, id)]
+        raise RegistryError(f"{kind} plugin {id!r} from {b.origin} is installed but was refused: {b.reason}")
     if id not in table:
         close = difflib.get_close_matches(id, list(table), n=3, cutoff=0.5)
         hint = f" Did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
@@ -116,3 +123,62 @@ def load_builtin_plugins() -> None:
         except ModuleNotFoundError as exc:  # a stage not built yet registers nothing
             if exc.name != mod:
                 raise
+    load_entry_point_plugins()
+
+
+#: entry-point group per plugin kind: a package registers a detector by an entry point whose *name*
+#: is the detector id (``cusum-residual-v1``) and whose *value* is its factory (``pkg.mod:make``),
+#: called as ``factory(model, **options)``; the first line of the factory's docstring is its summary
+ENTRY_POINT_GROUPS: dict[str, str] = {"detector": "fdi_sim.detectors"}
+
+
+@dataclass(frozen=True)
+class BrokenPlugin:
+    """An installed plugin that was refused, and why (``fdi-sim plugins`` lists them)."""
+
+    kind: str
+    id: str
+    origin: str
+    reason: str
+
+
+_BROKEN: dict[tuple[str, str], BrokenPlugin] = {}
+
+
+def broken_plugins() -> list[BrokenPlugin]:
+    """The installed plugins that were refused (bad id, duplicate id, import error, not callable)."""
+    load_builtin_plugins()
+    return [_BROKEN[k] for k in sorted(_BROKEN)]
+
+
+def load_entry_point_plugins() -> None:
+    """Register every installed entry-point plugin (:data:`ENTRY_POINT_GROUPS`), after the built-ins.
+
+    A plugin that cannot be used (an id that is not ``name-vN``, an id already taken, an import
+    that fails, a factory that is not callable) is not registered; it is kept with its reason
+    (:func:`broken_plugins`), so one broken package never stops the others or fdi-sim itself, and
+    asking for it says why.
+    """
+    from importlib.metadata import entry_points
+
+    for kind, group in ENTRY_POINT_GROUPS.items():
+        for ep in sorted(entry_points(group=group), key=lambda e: e.name):
+            origin = f"{ep.dist.name} {ep.dist.version}" if getattr(ep, "dist", None) else ep.value
+            why = None
+            if not _valid_id(ep.name):
+                why = f"its id {ep.name!r} (the entry point's name) must look like 'name-v1' (lower case, versioned)"
+            elif ep.name in _table(kind):
+                why = f"its id {ep.name!r} is already registered by {_table(kind)[ep.name].origin}"
+            else:
+                try:
+                    factory = ep.load()
+                except Exception as exc:  # noqa: BLE001 - any import error of a foreign package is its reason
+                    why = f"importing {ep.value} failed: {type(exc).__name__}: {exc}"
+                else:
+                    if not callable(factory):
+                        why = f"{ep.value} is a {type(factory).__name__}, not a factory callable"
+            if why is not None:
+                _BROKEN[(kind, ep.name)] = BrokenPlugin(kind, ep.name, origin, why)
+                continue
+            doc = (getattr(factory, "__doc__", None) or "").strip().splitlines()
+            register(kind, ep.name, doc[0].strip() if doc else f"plugin from {origin}", factory, origin=origin)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import beta, binom, chi2
@@ -21,7 +22,35 @@ from fdi_sim.decision.base import Decision, DecisionTrace, check_positive, check
 from fdi_sim.decision.chi2 import chi2_threshold
 from fdi_sim.errors import DesignError
 
-__all__ = ["Persistence", "persistence_false_alarm", "persistence_sample_probability"]
+__all__ = ["Persistence", "k_of_n", "k_of_n_step", "persistence_false_alarm", "persistence_sample_probability"]
+
+
+@numba.njit(cache=True, nogil=True)
+def k_of_n_step(fired, k, ring, state):  # pragma: no cover - compiled
+    """The one k-of-n kernel: push one per-sample test result, return the alarm.
+
+    ``count_j = count_{j-1} + a_j - a_{j-n}`` over a ring of the last ``n`` results (``ring``,
+    int64 (n,), starts all 0: a reset window holds no firing); ``state[0]`` is the ring position,
+    ``state[1]`` the count. The alarm is ``count_j >= k``. Called per sample by the bank's decision
+    (:func:`fdi_sim.sim.bank._decide`) and by :meth:`Persistence.step`; :func:`k_of_n` is its
+    vectorised twin (a test checks the two against each other).
+    """
+    pos = state[0]
+    state[1] += (1 if fired else 0) - ring[pos]
+    ring[pos] = 1 if fired else 0
+    state[0] = (pos + 1) % ring.shape[0]
+    return state[1] >= k
+
+
+def k_of_n(fired: NDArray[np.bool_], k: int, n: int) -> NDArray[np.bool_]:
+    """:func:`k_of_n_step` over whole sequences, along the last axis, from an empty window:
+    ``a_j = sum_{i=j-n+1..j} e_i >= k`` (``e_i = 0`` for ``i < 0``), the window sum as
+    ``c_j - c_{j-n}`` of the cumulative sum ``c`` (exact: integers)."""
+    k, n = _check_kn(k, n)
+    c = np.cumsum(fired, axis=-1, dtype=np.int64)
+    w = c.copy()
+    w[..., n:] -= c[..., :-n]
+    return w >= k
 
 
 def _check_kn(k: int, n: int) -> tuple[int, int]:
@@ -92,24 +121,22 @@ class Persistence:
             self.p_sample = float(chi2.sf(self.sample_threshold, self.dof))
             self.p_false_alarm = persistence_false_alarm(self.p_sample, self.k, self.n)
         self.threshold = float(self.k)
-        self._ring = np.zeros(self.n, dtype=bool)
+        self._ring = np.zeros(self.n, dtype=np.int64)
+        self._state = np.zeros(2, dtype=np.int64)  # ring position, count
         self.reset()
 
     def reset(self, rng: np.random.Generator | None = None) -> None:
         """Empty the window."""
-        self._ring[:] = False
-        self._pos = 0
-        self._count = 0
+        self._ring[:] = 0
+        self._state[:] = 0
 
     def step(self, t_s: float, statistic: float) -> Decision:
         """One chi-square value at time ``t_s`` [s]."""
         s = float(statistic)
         ok = math.isfinite(s)
         fired = ok and s > self.sample_threshold
-        self._count += int(fired) - int(self._ring[self._pos])  # count_k = count_{k-1} + a_k - a_{k-n}
-        self._ring[self._pos] = fired
-        self._pos = (self._pos + 1) % self.n
-        return Decision(t_s, float(self._count), self.threshold, ok and self._count >= self.k, None, ok)
+        on = k_of_n_step(fired, self.k, self._ring, self._state)  # count_k = count_{k-1} + a_k - a_{k-n}
+        return Decision(t_s, float(self._state[1]), self.threshold, ok and on, None, ok)
 
     def run(self, statistic: NDArray[np.float64]) -> DecisionTrace:
         """A whole trace (time on axis 0, any trailing shape)."""
@@ -117,6 +144,6 @@ class Persistence:
         ok = np.isfinite(s)
         c = np.cumsum(s > self.sample_threshold, axis=0, dtype=np.int64)
         count = c.copy()
-        count[self.n:] -= c[:-self.n]  # count_k = C_k - C_{k-n}
+        count[self.n:] -= c[:-self.n]  # count_k = C_k - C_{k-n} (the count of k_of_n)
         return DecisionTrace(count.astype(float), (count >= self.k) & ok, self.threshold, None,
                              None if ok.all() else ok)

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from fdi_sim.detectors.gust_kalman import settle_samples
 from fdi_sim.detectors.samples import is_wrapped
 from fdi_sim.detectors.scheduled import SCHEDULE_SIGNALS, GustKalmanSchedule
+from fdi_sim.detectors.stream import BlockOutputs
 
 TWO_PI = 2.0 * math.pi
 
@@ -240,9 +241,62 @@ class GustKalmanStream:
         self._a_sched = 1.0 / max(1.0, schedule.tau_s * self.rate_hz)  # low pass of the scheduling signals
         self.reset()
 
+    #: the streaming contract (:class:`fdi_sim.detectors.stream.StreamingDetector`): the residual is
+    #: the innovation, the estimate the predicted measurement; the filter compares the sensors through
+    #: a model (not independent), and isolates by fault direction (the cosine)
+    independent = False
+    fault_directions = True
+
     @property
     def n_outputs(self) -> int:
         return len(self.output_names)
+
+    @property
+    def residual_names(self) -> tuple[str, ...]:
+        """The innovation's columns (one per measurement)."""
+        return self.output_names
+
+    @property
+    def estimate_names(self) -> tuple[str, ...]:
+        """The predicted measurements' columns (reconfiguration substitutes them)."""
+        return self.output_names
+
+    @property
+    def threshold(self) -> float:
+        """The alarm threshold on the statistic [-] (every schedule point alike: each point's
+        statistic is normalized by its own ``Sigma_m``)."""
+        return float(self._thr[0])
+
+    def set_threshold(self, value: float) -> None:
+        """Set the threshold of every schedule point [-]."""
+        self._thr[:] = float(value)
+
+    @property
+    def samples_seen(self) -> int:
+        """Samples processed since the last reset (the gain index of the next one)."""
+        return int(self._st[0])
+
+    def effectiveness_estimator(self, actuator: str):
+        """An estimator of ``actuator``'s effectiveness from this filter's innovations (reconfiguration
+        of a confirmed actuator fault; :class:`~fdi_sim.detectors.effectiveness.EffectivenessEstimator`)."""
+        from fdi_sim.detectors.effectiveness import EffectivenessEstimator
+
+        return EffectivenessEstimator(self, actuator)
+
+    def design_key(self) -> bytes:
+        """What the statistic depends on (not the threshold): the matrices, gains, ``Sigma_m^-1`` and
+        schedule points, and the window (the bytes the shipped thresholds files' design hashes were
+        made of, :func:`fdi_sim.sim.bank_design.design_hash`)."""
+        parts = [np.ascontiguousarray(a, dtype=np.float64).tobytes()
+                 for a in (self._A, self._B, self._C, self._D, self._L, self._G, self._Si, self.schedule.points)]
+        return b"".join(parts) + str(self.window_n).encode()
+
+    def process_block(self, t_s: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64],
+                      ok: NDArray[np.bool_], fresh: NDArray[np.bool_], out: BlockOutputs) -> None:
+        """The streaming contract's call (:meth:`process` into ``out``; ``t_s`` and ``fresh`` unused:
+        a held value is a valid measurement of the filter's sample)."""
+        self.process(u, y, ok, out.statistic, out.threshold, out.valid, out.hypothesis, out.cosine, out.point,
+                     out.residual, out.estimate)
 
     def reset(self, point: int | None = None) -> None:
         """Fresh filter at the trim of ``point`` (default: the nearest to the first design's trim, 0)."""

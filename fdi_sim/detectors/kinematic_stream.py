@@ -57,6 +57,7 @@ from numpy.typing import NDArray
 from fdi_sim.detectors import kinematic as _kin
 from fdi_sim.detectors.kinematic import CHANNELS, GNSS, HYPOTHESES, NEEDS, KinematicDetector, KinematicRun
 from fdi_sim.detectors.samples import Samples, is_wrapped
+from fdi_sim.detectors.stream import BlockOutputs
 from fdi_sim.errors import DesignError
 from fdi_sim.isa import isa
 from fdi_sim.units import KT_PER_FPS
@@ -495,6 +496,47 @@ class KinematicStream:
     def samples_seen(self) -> int:
         """Rows processed since the last :meth:`reset`."""
         return int(self._ist[_S_K])
+
+    # --- the streaming contract (fdi_sim.detectors.stream.StreamingDetector) -----------------
+    #: the checks read measurements only
+    input_names: tuple[str, ...] = ()
+    #: no filter: nothing a failed sensor could be replaced by
+    estimate_names: tuple[str, ...] = ()
+    #: a residual per sensor, no fault direction (the angle-magnitude rule cannot use it)
+    fault_directions = False
+
+    @property
+    def residual_names(self) -> tuple[str, ...]:
+        """The residual's columns (:attr:`channels`)."""
+        return self.channels
+
+    @property
+    def independent(self) -> bool:
+        """The check compares one sensor group with an independent one (gyros with the AHRS, baro
+        and pitot with GNSS), so its isolation alone may reconfigure; the flow-angle check leans on
+        the pitot and the AHRS as well (a drifting airspeed makes it name the alpha vane, measured
+        on the DHC-6 pitot drift), so it is not."""
+        return self.kind != "flow-angles"
+
+    def set_threshold(self, value: float) -> None:
+        """Set the alarm threshold [-] (the kernel isolates above it)."""
+        self.threshold = float(value)
+        self._prm[0] = float(value)
+
+    def start_at(self, h_ft: float, vc_kts: float) -> None:
+        """The checks have no operating point: a reset."""
+        self.reset()
+
+    def design_key(self) -> bytes:
+        """The design the numbers come from (its repr: kind, rate, windows, scales, threshold)."""
+        return repr(self.design).encode()
+
+    def process_block(self, t_s: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64],
+                      ok: NDArray[np.bool_], fresh: NDArray[np.bool_], out: BlockOutputs) -> None:
+        """The streaming contract's call: :meth:`process` into ``out``, the threshold written per
+        sample (``u`` unused)."""
+        self.process(t_s, y, ok, fresh, out.statistic, out.valid, out.hypothesis, out.residual)
+        out.threshold[:] = self._prm[0]
 
     def process(self, t_s: NDArray[np.float64], y: NDArray[np.float64], ok: NDArray[np.bool_],
                 fresh: NDArray[np.bool_], out_statistic: NDArray[np.float64], out_valid: NDArray[np.bool_],

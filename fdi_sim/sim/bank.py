@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.decision.failure_log import FailureLogger
+from fdi_sim.decision.persistence import k_of_n_step
 from fdi_sim.errors import DesignError
 
 #: the commands an actuator reconfiguration can rescale, in the loop's write order
@@ -109,16 +110,11 @@ def _decide(stat, thr, valid, hyp, k, need_direction, ring, st, votes, exceed, a
     ``votes`` (H,) votes of the current alarm; ``lead`` gets the leader's votes at each sample. With ``need_direction`` (the two-step rule) a sample
     exceeds only if its residual is also within the angle bound of some fault direction
     (``hyp >= 0``: the detector's cosine test passed)."""
-    n = ring.shape[0]
     st[5] = 0
     for j in range(stat.shape[0]):
         e = valid[j] and stat[j] > thr[j] and (hyp[j] >= 0 or not need_direction)
         exceed[j] = e
-        pos = st[0]
-        st[1] += (1 if e else 0) - ring[pos]
-        ring[pos] = 1 if e else 0
-        st[0] = (pos + 1) % n
-        on = st[1] >= k
+        on = k_of_n_step(e, k, ring, st)  # the one k-of-n kernel (st[0], st[1]: ring position, count)
         if on:
             h = hyp[j]
             if e and h >= 0:
@@ -188,73 +184,65 @@ TRACE_FIELDS = tuple(TRACE_ATTR)
 
 
 class _Member:
-    """One detector of the bank: its kernel, column maps, block buffers, decision state."""
+    """One detector of the bank: its stream (:class:`~fdi_sim.detectors.stream.StreamingDetector`),
+    column maps, block buffers and decision state. Nothing here depends on what kind of detector
+    the stream is: its capabilities are its attributes (``estimate_names``, ``independent``,
+    ``fault_directions``)."""
 
-    def __init__(self, stream: Any, kind: str, meas_names: Sequence[str], cmd_names: Sequence[str],
+    def __init__(self, stream: Any, meas_names: Sequence[str], cmd_names: Sequence[str],
                  every: Mapping[str, int], S: int, decision: DecisionConfig) -> None:
-        self.stream, self.kind, self.id = stream, kind, stream.id
+        from fdi_sim.detectors.stream import BlockOutputs
+
+        self.stream, self.id = stream, str(stream.id)
         self.hypotheses = tuple(stream.hypotheses)
         names = tuple(stream.output_names)
         missing = [nm for nm in names if nm not in meas_names]
         if missing:
             raise DesignError(f"{self.id} needs the measurements {missing}, which the sensor suite does not have")
+        missing = [nm for nm in stream.input_names if nm not in cmd_names]
+        if missing:
+            raise DesignError(f"{self.id} needs the commands {missing}, which the loop does not log")
         self.output_names = names
+        self.input_names = tuple(stream.input_names)
+        self.residual_names = tuple(stream.residual_names)
+        self.estimate_names = tuple(stream.estimate_names)
+        bad = [nm for nm in self.estimate_names if nm not in names]
+        if bad:
+            raise DesignError(f"{self.id} estimates {bad}, which are not among its outputs {list(names)}")
         self.cols = np.array([list(meas_names).index(nm) for nm in names], dtype=np.int64)
+        self.in_cols = np.array([list(cmd_names).index(nm) for nm in self.input_names], dtype=np.int64)
         self.every = np.array([max(1, int(every.get(nm, 1))) for nm in names], dtype=np.int64)
         self.excluded = np.zeros(len(names), dtype=np.bool_)
         p = len(names)
         self.y = np.empty((S, p))
         self.ok = np.empty((S, p), dtype=np.bool_)
         self.fresh = np.empty((S, p), dtype=np.bool_)
-        self.stat = np.empty(S)
-        self.thr = np.empty(S)
-        self.valid = np.empty(S, dtype=np.bool_)
-        self.hyp = np.empty(S, dtype=np.int64)
+        self.u = np.empty((S, len(self.in_cols)))
+        self.out = BlockOutputs.allocate(S, len(self.residual_names), len(self.estimate_names))
+        o = self.out
+        self.stat, self.thr, self.valid, self.hyp, self.point = o.statistic, o.threshold, o.valid, o.hypothesis, o.point
+        self.nu, self.yhat, self.cos = o.residual, o.estimate, o.cosine
         self.exceed = np.empty(S, dtype=np.bool_)
         self.alarm = np.empty(S, dtype=np.bool_)
         self.iso = np.empty(S, dtype=np.int64)
-        self.point = np.zeros(S, dtype=np.int64)
         self.rows = np.empty((S, 7))  # the statistic topic's rows (STAT_FIELDS after t_s)
         self.lead = np.zeros(S, dtype=np.int64)  # the isolation leader's votes per sample
         self.full_S = S
-        if kind == "gust":
-            missing = [nm for nm in stream.input_names if nm not in cmd_names]
-            if missing:
-                raise DesignError(f"{self.id} needs the commands {missing}, which the loop does not log")
-            self.in_cols = np.array([list(cmd_names).index(nm) for nm in stream.input_names], dtype=np.int64)
-            self.cos = np.empty(S)
-            self.nu = np.empty((S, p))
-            self.yhat = np.empty((S, p))
-            self.residual_names = names
-        else:
-            self.residual_names = tuple(stream.channels)
-            self.nu = np.empty((S, len(self.residual_names)))
         self.decision = decision
         self.angle_rule = decision.rule == "angle-magnitude"
-        # a check that compares one sensor group with an independent one (gyros with the AHRS,
-        # baro and pitot with GNSS); the flow-angle check leans on the pitot and the AHRS as well
-        self.direct = kind == "kinematic" and getattr(stream, "kind", "") != "flow-angles"
+        self.direct = bool(stream.independent)
         self.keep = False
-        if kind == "gust":
-            self.u = np.empty((S, len(self.in_cols)))
-        self._arrays = (self.y, self.ok, self.fresh, self.stat, self.thr, self.valid, self.hyp, self.exceed, self.alarm,
-                        self.iso, self.nu)
-        self._full = tuple(a[:S] for a in self._arrays)
+        self.j_start = 0
         self.reset()
 
     @property
     def threshold(self) -> float:
         """The alarm threshold on the statistic [-] (:meth:`set_threshold`)."""
-        return float(self.stream._thr[0]) if self.kind == "gust" else float(self.stream.threshold)
+        return float(self.stream.threshold)
 
     def set_threshold(self, value: float) -> None:
-        """The alarm threshold on the statistic (every schedule point alike: each point's statistic
-        is normalized by its own covariance)."""
-        if self.kind == "gust":
-            self.stream._thr[:] = value
-        else:
-            self.stream.threshold = float(value)
-            self.stream._prm[0] = float(value)  # the kernel isolates above it
+        """The alarm threshold on the statistic, through the stream's contract."""
+        self.stream.set_threshold(float(value))
 
     def trace_series(self) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """The statistic of every sample since :meth:`FdiBank.keep_trace`, and whether each was
@@ -277,23 +265,21 @@ class _Member:
 
     def run(self, u_avg: NDArray[np.float64], meas: NDArray[np.float64], valid: NDArray[np.bool_], row0: int,
             n: int, S: int, t: NDArray[np.float64], unarmed: int = 0) -> None:
-        if S == self.full_S:  # the loop's case: views made once (slicing costs ~0.2 us a view)
-            y, ok, fresh, stat, thr, val, hyp, ex, al, iso, nu = self._full
+        if S == self.full_S:  # the loop's case: the arrays themselves (slicing costs ~0.2 us a view)
+            y, ok, fresh, u, out, ex, al, iso, lead = (self.y, self.ok, self.fresh, self.u, self.out, self.exceed,
+                                                       self.alarm, self.iso, self.lead)
         else:
-            y, ok, fresh, stat, thr, val, hyp, ex, al, iso, nu = (a[:S] for a in self._arrays)
+            y, ok, fresh, u, ex, al, iso, lead = (a[:S] for a in (self.y, self.ok, self.fresh, self.u, self.exceed,
+                                                                  self.alarm, self.iso, self.lead))
+            out = self.out.rows(S)
         _gather(meas, valid, self.cols, self.excluded, self.every, row0, n, y, ok, fresh)
-        if self.kind == "gust":
-            u = self.u[:S]
-            _take_cols(u_avg, self.in_cols, u)
-            self.j_start = int(self.stream._st[0])  # the gain index of the block's first sample
-            self.stream.process(u, y, ok, stat, thr, val, hyp, self.cos[:S], self.point[:S], nu, self.yhat[:S])
-        else:
-            thr[:] = self.stream.threshold
-            self.stream.process(t[:S], y, ok, fresh, stat, val, hyp, nu)
+        _take_cols(u_avg, self.in_cols, u)
+        self.j_start = int(getattr(self.stream, "samples_seen", 0))  # the block's first sample (estimators)
+        self.stream.process_block(t[:S] if S != t.shape[0] else t, u, y, ok, fresh, out)
         if unarmed:  # before the bank is armed the statistic is logged, never decided on
-            val[:unarmed] = False
-        _decide(stat, thr, val, hyp, self.decision.k, self.angle_rule, self.ring, self.st, self.votes, ex, al, iso,
-                self.lead[:S])
+            out.valid[:unarmed] = False
+        _decide(out.statistic, out.threshold, out.valid, out.hypothesis, self.decision.k, self.angle_rule, self.ring,
+                self.st, self.votes, ex, al, iso, lead)
         if self.keep:
             for k in TRACE_FIELDS:
                 self.trace[k].append(getattr(self, TRACE_ATTR[k])[:S].copy())
@@ -326,8 +312,7 @@ class FdiBank:
     Parameters
     ----------
     streams : sequence
-        ``(kind, stream)`` with kind ``"gust"`` (:class:`~fdi_sim.detectors.gust_kalman_stream.GustKalmanStream`)
-        or ``"kinematic"`` (:class:`~fdi_sim.detectors.kinematic_stream.KinematicStream`).
+        The members, each a :class:`~fdi_sim.detectors.stream.StreamingDetector`.
     cmd_names, meas_names : sequence of str
         Columns of :attr:`cmd_rows` and :attr:`meas_rows` (the logged commands and measurements).
     sensor_rates_hz : mapping
@@ -365,13 +350,12 @@ class FdiBank:
         every = {nm: int(round(sim_rate_hz / r)) for nm, r in sensor_rates_hz.items() if r}
         self.decision = decision
         if decision.rule == "angle-magnitude":
-            no_dir = [kind for kind, _ in streams if kind != "gust"]
-            if no_dir:
-                bad = [getattr(st, "id", "?") for kind, st in streams if kind != "gust"]
+            bad = [str(getattr(st, "id", "?")) for st in streams if not getattr(st, "fault_directions", False)]
+            if bad:
                 raise DesignError(f"the angle-magnitude rule needs fault directions (C D_f), which {', '.join(bad)} "
                                   "do not give (a kinematic check has a residual per sensor, no direction); use "
-                                  "decision = \"persistence\" or a bank of kalman-gust-v1 only")
-        self.members = [_Member(s, kind, self.meas_names, self.cmd_names, every, self.S, decision) for kind, s in streams]
+                                  "decision = \"persistence\", or members with fault directions only")
+        self.members = [_Member(s, self.meas_names, self.cmd_names, every, self.S, decision) for s in streams]
         ids = [m.id for m in self.members]
         if len(set(ids)) != len(ids):
             raise DesignError(f"detector ids in a bank must be unique: {ids}")
@@ -460,9 +444,9 @@ class FdiBank:
             if log_residuals:
                 ch.resid = writer.add_vector_channel(fdi_topic(m.id, "residual"), _msg_name(m.id, "Residual"),
                                                      ("t_s",) + tuple(m.residual_names))
-                if m.kind == "gust":
+                if m.estimate_names:
                     ch.est = writer.add_vector_channel(fdi_topic(m.id, "estimate"), _msg_name(m.id, "Estimate"),
-                                                       ("t_s",) + tuple(m.output_names))
+                                                       ("t_s",) + tuple(m.estimate_names))
             self._chans.append(ch)
         self._ch_alarms = writer.add_event_channel(TOPIC_FDI_ALARMS, "fdi_sim/msg/Alarm", ALARM_JSON_SCHEMA)
         self._ch_flog = writer.add_event_channel(TOPIC_FDI_FAILURE_LOG, "fdi_sim/msg/FailureLogEntry",
@@ -575,8 +559,8 @@ class FdiBank:
                         if self._should_correct(name):
                             self._reconfigure_sensor(name, float(t[j]))
                             changed = True
-                        elif (m.kind == "gust" and name in ACTUATOR_INPUTS and name in m.stream.input_names
-                              and name not in self._estimators):
+                        elif (name in ACTUATOR_INPUTS and name in m.input_names and name not in self._estimators
+                              and hasattr(m.stream, "effectiveness_estimator")):
                             self._start_estimator(m, name, float(t[j]))
                 m.was_on = on
         for j in range(S):
@@ -636,7 +620,7 @@ class FdiBank:
 
     def _estimator(self, name: str) -> _Member | None:
         """The member that estimates a sensor from the others (a filter that measures it)."""
-        return next((m for m in self.members if m.kind == "gust" and name in m.output_names), None)
+        return next((m for m in self.members if name in m.estimate_names), None)
 
     def _should_correct(self, name: str) -> bool:
         """Correct a sensor once a kinematic check (exact kinematics, no model) or two members have
@@ -648,12 +632,12 @@ class FdiBank:
         if name in self._corrected or name not in self.pilot_sensors or self._estimator(name) is None:
             return False
         by = self._confirmed.get(name, set())
-        direct = any(m.kind == "kinematic" and m.id in by and m.direct for m in self.members)
+        direct = any(m.id in by and m.direct for m in self.members)
         return direct or len(by) >= 2
 
     def _reconfigure_sensor(self, name: str, t_s: float) -> None:
         m = self._estimator(name)
-        c = m.output_names.index(name)
+        c = m.output_names.index(name)  # excluded from the member's measurement update
         m.excluded[c] = True
         corr = Correction(name, self.meas_names.index(name), t_s, m.id)
         self.corrections.append(corr)
@@ -666,9 +650,7 @@ class FdiBank:
 
     def _start_estimator(self, m: _Member, name: str, t_s: float) -> None:
         """An actuator confirmed by a filter: estimate its effectiveness from the next block on."""
-        from fdi_sim.detectors.effectiveness import EffectivenessEstimator
-
-        self._estimators[name] = (m, EffectivenessEstimator(m.stream, name), t_s)
+        self._estimators[name] = (m, m.stream.effectiveness_estimator(name), t_s)
 
     def _update_estimators(self, t: NDArray[np.float64], S: int) -> bool:
         """Feed the effectiveness estimators; rescale a command once its estimate allows it (latched:
@@ -699,8 +681,7 @@ class FdiBank:
         no longer uses the sensor, so ``y_hat`` is its estimate from the others)."""
         for c in self.corrections:
             m = next(mm for mm in self.members if mm.id == c.detector)
-            col = m.output_names.index(c.sensor)
-            d = m.y[:S, col] - m.yhat[:S, col]
+            d = m.y[:S, m.output_names.index(c.sensor)] - m.yhat[:S, m.estimate_names.index(c.sensor)]
             d = d[np.isfinite(d)]
             if d.size:
                 c.fault_estimate = float(d.mean())

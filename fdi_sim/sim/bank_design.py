@@ -2,8 +2,8 @@
 
 ``[fdi] bank = "default"`` gives every aircraft the detectors ``docs/detectors.md`` finds working
 on it (:data:`DEFAULT_BANKS`); ``[[detectors]]`` entries add to it (or make the bank on their
-own). Only detectors with a streaming kernel run in the loop (:data:`IN_LOOP`); the others run
-offline (``fdi-sim detect``).
+own). Any registered detector, built in or a plugin, runs in the loop through the one streaming
+contract (:mod:`fdi_sim.detectors.stream`; :func:`member_stream`).
 
 Designs: ``kalman-gust-v1`` at the schedule points the flight crosses
 (:func:`fdi_sim.sim.designs.schedule_points`, gain-scheduled when there is more than one and
@@ -44,14 +44,6 @@ DEFAULT_BANKS: dict[str, tuple[str, ...]] = {
     ac: ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1",
          "kinematic-flow-angles-v1") for ac in ("f16", "DHC6")
 }
-#: detectors with a streaming kernel, and its kind
-IN_LOOP: dict[str, str] = {
-    "kalman-gust-v1": "gust",
-    "kinematic-attitude-v1": "kinematic",
-    "kinematic-altitude-v1": "kinematic",
-    "kinematic-airspeed-v1": "kinematic",
-    "kinematic-flow-angles-v1": "kinematic",
-}
 #: thresholds meet the per-sample target with this confidence (flight-level bootstrap)
 THRESHOLD_CONFIDENCE = 0.95
 #: per-process memo of gust-filter schedules (design scenario -> schedule, note), or None (off): a
@@ -72,19 +64,32 @@ class MemberSpec:
 
 
 def bank_members(sc: Scenario) -> list[MemberSpec]:
-    """The detectors a scenario's bank runs (empty: no bank)."""
+    """The detectors a scenario's bank runs (empty: no bank): any registered detector, built in or
+    a plugin (``fdi-sim plugins``).
+
+    Raises
+    ------
+    ScenarioError
+        An id that is not registered (with a "did you mean"), or two entries of the same id.
+    """
+    from fdi_sim.errors import RegistryError
+
     out: list[MemberSpec] = []
     f = sc.model.fdi
     if f.bank != "none":
         out += [MemberSpec(i, {}, "bank") for i in DEFAULT_BANKS[sc.aircraft]]
+    seen: dict[str, str] = {}
     for i, (tid, params) in enumerate(sc.detectors):
         key = f"detectors[{i}]"
-        if tid not in IN_LOOP:
-            close = difflib.get_close_matches(tid, list(IN_LOOP), n=1)
-            raise ScenarioError(sc.source, f"{key}.type", f"{tid!r} has no streaming kernel and cannot run in the loop"
-                                + (f" (did you mean {close[0]!r}?)" if close else ""),
-                                f"in the loop: {', '.join(IN_LOOP)}; run {tid} offline with `fdi-sim detect LOG "
-                                f"--detector {tid}`")
+        try:
+            registry.get("detector", tid)
+        except RegistryError as e:
+            raise ScenarioError(sc.source, f"{key}.type", str(e), "`fdi-sim plugins` lists every registered detector "
+                                "(an installed plugin package registers its own)") from None
+        if tid in seen:
+            raise ScenarioError(sc.source, f"{key}.type", f"{tid!r} is already {seen[tid]}: detector ids in a bank "
+                                "must be unique", "remove one of the two entries")
+        seen[tid] = key
         p = dict(params) if isinstance(params, dict) else dict(getattr(params, "model_dump", lambda: {})())
         p = {k: v for k, v in p.items() if k != "type"}
         spec = MemberSpec(tid, p, key)
@@ -118,23 +123,20 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
         return None
     sc = design_scenario(sc)  # designs, training flights and thresholds: at the design conditions
     f = sc.model.fdi
-    if f.decision == "angle-magnitude":
-        bad = [m.id for m in members if IN_LOOP[m.id] != "gust"]
-        if bad:
-            raise ScenarioError(sc.source, "fdi.decision", f"angle-magnitude needs fault directions (C D_f), which "
-                                f"{', '.join(bad)} do not give", 'use decision = "persistence", or a bank of '
-                                "kalman-gust-v1 only ([[detectors]] without bank = \"default\")")
     # the training flights are flown at most once, and only if some calibration is not cached
     logs = training_logs if training_logs is not None else LazyTraining(sc, progress)
+    ctx = MemberContext(sc, tuple(cmd_names), tuple(meas_names), progress, logs)
     streams, notes = [], []
     for m in members:
-        kind = IN_LOOP[m.id]
-        if kind == "gust":
-            stream, note = _gust_stream(sc, m, progress=progress, training_logs=logs)
-        else:
-            stream, note = _kinematic_stream(sc, m)
-        streams.append((kind, stream))
+        stream, note = member_stream(ctx, m)
+        streams.append(stream)
         notes.append(note)
+    if f.decision == "angle-magnitude":
+        bad = [s.id for s in streams if not s.fault_directions]
+        if bad:
+            raise ScenarioError(sc.source, "fdi.decision", f"angle-magnitude needs fault directions (C D_f), which "
+                                f"{', '.join(bad)} do not give", 'use decision = "persistence", or members with '
+                                "fault directions only ([[detectors]] without bank = \"default\")")
     S = int(round(f.block_s * f.rate_hz))
     decision = DecisionConfig(f.persistence_k, f.persistence_n, max(1, int(round(f.confirm_s * f.rate_hz))), f.decision)
     bank = FdiBank(streams, cmd_names=cmd_names, meas_names=meas_names, sensor_rates_hz=sensor_rates_hz,
@@ -208,20 +210,15 @@ def thresholds_source(sc: Scenario) -> tuple[Path | None, bool]:
 
 
 def design_hash(bank: Any) -> str:
-    """Hash of what the members' statistics depend on (not their thresholds): per member its id,
-    the gust filter's matrices, gains, window, ``Sigma_m^-1`` and schedule points, a kinematic
-    check's design; and the bank's rate and measurement columns."""
+    """Hash of what the members' statistics depend on (not their thresholds): per member its id and
+    its stream's ``design_key()``; and the bank's rate and measurement columns."""
     h = hashlib.sha256()
     h.update(json.dumps([bank.rate_hz, list(bank.meas_names)], default=str).encode())
+    from fdi_sim.detectors.stream import stream_design_key
+
     for mem in bank.members:
         h.update(mem.id.encode())
-        st = mem.stream
-        if hasattr(st, "_A"):
-            for a in (st._A, st._B, st._C, st._D, st._L, st._G, st._Si, st.schedule.points):
-                h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-            h.update(str(st.window_n).encode())
-        else:
-            h.update(repr(getattr(st, "design", getattr(st, "det", ""))).encode())
+        h.update(stream_design_key(mem.stream))
     return h.hexdigest()[:24]
 
 
@@ -392,7 +389,102 @@ class LazyTraining:
         return iter(self._logs)
 
 
-def _gust_stream(sc: Scenario, m: MemberSpec, *, progress: bool, training_logs: Any = None) -> tuple[Any, str]:
+@dataclass
+class MemberContext:
+    """What designing one member of a scenario's bank may use.
+
+    Attributes
+    ----------
+    sc : Scenario
+        The design scenario (:func:`design_scenario`).
+    cmd_names, meas_names : tuple of str
+        The commands and measurements the loop logs (a member reads a subset).
+    progress : bool
+        Show progress bars (training flights, schedule designs).
+    training_logs : sequence
+        The fault-free training flights (lazy: flown on first use).
+    """
+
+    sc: Scenario
+    cmd_names: tuple[str, ...]
+    meas_names: tuple[str, ...]
+    progress: bool
+    training_logs: Any
+    _model: Any = None
+
+    def model(self) -> Any:
+        """The linear model at the scenario's initial point, at the bank's rate, in the samples' form
+        (:func:`fdi_sim.sim.detect.model_for_scenario`), made once."""
+        if self._model is None:
+            from fdi_sim.sim.detect import model_for_scenario
+
+            self._model = model_for_scenario(self.sc, self.sc.model.fdi.rate_hz).model
+        return self._model
+
+
+def member_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
+    """One member's :class:`~fdi_sim.detectors.stream.StreamingDetector` and a note for the log.
+
+    How a detector is *designed* differs by family; how it *runs* does not. The gust filter is
+    gain-scheduled over the flight's points and calibrated on training flights
+    (:func:`_gust_stream`); the kinematic checks take the aircraft and turbulence
+    (:func:`_kinematic_stream`); every other detector, built in or a plugin, is built by its
+    registered factory from the linear model at the initial point (:func:`_model_stream`).
+    """
+    builder = _DESIGNERS.get(m.id, _model_stream)
+    return builder(ctx, m)
+
+
+def _model_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
+    """A detector designed by its registry factory from the initial point's model. A factory that
+    returns a :class:`~fdi_sim.detectors.stream.StreamingDetector` (a plugin's) runs as it is; a
+    per-sample detector runs through its compiled stream where one exists
+    (:func:`fdi_sim.detectors.seed_streams.compiled_stream`), else through
+    :class:`~fdi_sim.detectors.step_stream.StepStream`."""
+    from fdi_sim.detectors.step_stream import StepStream
+    from fdi_sim.detectors.stream import StreamingDetector
+    from fdi_sim.sim.detect import DetectorSpec, build_detector
+
+    sc = ctx.sc
+    params = {k: v for k, v in m.params.items() if k not in ENTRY_KEYS}
+    model = ctx.model()
+    where = f"h {sc.model.initial.h_ft:g} ft"
+    try:
+        det = build_detector(DetectorSpec(m.id, params), model)
+    except DesignError as exc:
+        raise DesignError(f"{sc.source}: {m.id} cannot be designed at the initial point ({where}): {exc}") from None
+    if isinstance(det, StreamingDetector):
+        stream, how = det, "its own stream"
+    else:
+        stream = None
+        try:
+            from fdi_sim.detectors.seed_streams import compiled_stream
+        except ImportError:  # pragma: no cover - a partial install
+            compiled_stream = None
+        if compiled_stream is not None:
+            stream = compiled_stream(det, model, ctx.cmd_names, m.id)
+        how = "compiled stream"
+        if stream is None:
+            stream, how = StepStream(det, model, ctx.cmd_names, params, id=m.id), "per-sample step (Python)"
+    if str(getattr(stream, "id", "")) != m.id:
+        raise DesignError(f"{m.id}: the factory returned a detector whose id is {getattr(stream, 'id', None)!r}; a "
+                          "member's id is its registered id")
+    origin = registry.get("detector", m.id).origin
+    if origin != "fdi-sim":  # a plugin: checked before it flies (the built-ins are checked by the suite)
+        from fdi_sim.detectors.check import CORRECTNESS, check_stream, contract_inputs
+
+        fails = check_stream(stream, contract_inputs(stream, model, rate_hz=sc.model.fdi.rate_hz))
+        wrong = [f for f in fails if f.check in CORRECTNESS]
+        if wrong:
+            raise DesignError(f"{sc.source}: plugin detector {m.id} ({origin}) fails its contract check: "
+                              + "; ".join(str(f) for f in wrong))
+        how = f"plugin from {origin}" + "".join(f"; {f}" for f in fails)
+    return stream, f"{m.id}: one design at the initial point ({where}), {how}"
+
+
+def _gust_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
+    """kalman-gust-v1: gain-scheduled over the flight's points, ``Sigma_m`` from training flights."""
+    sc, progress, training_logs = ctx.sc, ctx.progress, ctx.training_logs
     from fdi_sim.detectors.gust_kalman_stream import GustKalmanStream
     from fdi_sim.detectors.scheduled import GustKalmanSchedule
     from fdi_sim.sim.calibrate import calibrated_gust_kalman
@@ -441,7 +533,9 @@ def _gust_stream(sc: Scenario, m: MemberSpec, *, progress: bool, training_logs: 
     return GustKalmanStream(sched, min_cosine=min_cos, id=m.id), note
 
 
-def _kinematic_stream(sc: Scenario, m: MemberSpec) -> tuple[Any, str]:
+def _kinematic_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
+    """A kinematic check: its catalogue design for the aircraft and the turbulence level."""
+    sc = ctx.sc
     from fdi_sim.detectors.kinematic_stream import KinematicStream
     from fdi_sim.sim.detect import DetectorSpec, build_detector
 
@@ -449,6 +543,13 @@ def _kinematic_stream(sc: Scenario, m: MemberSpec) -> tuple[Any, str]:
               **{k: v for k, v in m.params.items() if k not in ENTRY_KEYS}}
     det = build_detector(DetectorSpec(m.id, params), None)
     return KinematicStream(det), f"{m.id}: {det.design.kind} check ({sc.model.atmosphere.turbulence} turbulence)"
+
+
+#: how each detector family is designed for a bank (:func:`member_stream`); every other id: its factory
+_DESIGNERS: dict[str, Callable[[MemberContext, MemberSpec], tuple[Any, str]]] = {
+    "kalman-gust-v1": _gust_stream,
+    **{f"kinematic-{k}-v1": _kinematic_stream for k in ("attitude", "altitude", "airspeed", "flow-angles")},
+}
 
 
 # --- thresholds from the training flights ---------------------------------------------------------
@@ -459,6 +560,7 @@ def _cache_path(key: str) -> Path:
 
 
 def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
+    from fdi_sim.detectors.stream import stream_design_key
     from fdi_sim.sim.calibrate import fault_free
 
     f = sc.model.fdi
@@ -469,14 +571,9 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
     h = hashlib.sha256()
     for mem in bank.members:
         h.update(mem.id.encode())
-        st = mem.stream
-        if hasattr(st, "_A"):
-            for a in (st._A, st._C, st._L, st._G[:, -1], st.schedule.points):
-                h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-        else:
-            h.update(repr(getattr(st, "design", getattr(st, "det", ""))).encode())
+        h.update(stream_design_key(mem.stream))
     blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "confidence": THRESHOLD_CONFIDENCE, "n": f.calibration_flights, "T": f.calibration_duration_s,
-                       "decision": [f.persistence_k, f.persistence_n], "method": "episodes-v4", "version": __version__, "members": h.hexdigest()},
+                       "decision": [f.persistence_k, f.persistence_n], "method": "episodes-v5", "version": __version__, "members": h.hexdigest()},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 

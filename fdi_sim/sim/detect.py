@@ -313,7 +313,37 @@ def _run_spec(spec: DetectorSpec, lm: LogModel, log: FlightLog, samples: Samples
         return run_vectorised(det, spec.id, log_samples(log, MeasurementSet(), rate_hz, sensor_rates_hz=rates),
                               float(det.design.threshold))
     det = build_detector(spec, lm.model)
+    from fdi_sim.detectors.stream import StreamingDetector
+
+    if isinstance(det, StreamingDetector):  # a plugin's stream: one block over the whole log
+        return run_stream(det, spec.id, samples, lm.model)
     return run_detector(det, spec.id, samples, lm.model)
+
+
+def run_stream(stream: Any, ident: str, samples: Samples, model: Any) -> DetectorTrace:
+    """A :class:`~fdi_sim.detectors.stream.StreamingDetector` over the samples as one block
+    (absolute commands and measurements in its columns; the alarm is ``valid and statistic >
+    threshold`` per sample, as :func:`run_detector` reports a per-sample detector)."""
+    from fdi_sim.detectors.stream import BlockOutputs
+
+    n = samples.n
+    u_abs = np.tile(np.asarray(model.u0, dtype=float), (n, 1))
+    m_in = tuple(model.input_names)
+    u_abs[:, [m_in.index(nm) for nm in samples.input_names]] += samples.du
+    u = np.ascontiguousarray(u_abs[:, [m_in.index(nm) for nm in stream.input_names]])
+    idx = [samples.output_names.index(nm) for nm in stream.output_names]
+    y = np.ascontiguousarray((samples.dy + samples.y0)[:, idx])
+    ok = np.ascontiguousarray(samples.valid[:, idx])
+    fresh = np.ascontiguousarray(samples.fresh[:, idx])
+    out = BlockOutputs.allocate(n, len(stream.residual_names), len(stream.estimate_names))
+    stream.reset()
+    t0 = time.perf_counter()
+    stream.process_block(np.ascontiguousarray(samples.t_s, dtype=float), u, y, ok, fresh, out)
+    cost = (time.perf_counter() - t0) / max(n, 1) * 1e6
+    alarm = out.valid & (out.statistic > out.threshold)
+    iso = tuple(stream.hypotheses[h] if a and h >= 0 else None for a, h in zip(alarm, out.hypothesis))
+    return DetectorTrace(ident, samples.t_s, out.statistic.copy(), out.threshold.copy(), alarm, out.valid.copy(), iso,
+                         cost)
 
 
 def run_vectorised(det: Any, ident: str, samples: Samples, threshold: float) -> DetectorTrace:

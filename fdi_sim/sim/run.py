@@ -328,9 +328,9 @@ def build_loop_bank(sc: Scenario, sensors: SensorSuite, progress: bool | None) -
 
 def bank_metadata(bank: FdiBank) -> dict[str, str]:
     """The bank as strings for the log's metadata (what a replay and a reviewer need)."""
-    members = [{"id": m.id, "kind": m.kind, "hypotheses": list(m.hypotheses), "outputs": list(m.output_names),
-                "residuals": list(m.residual_names), "threshold": float(m.stream.threshold) if m.kind != "gust" else
-                float(m.stream._thr[0])} for m in bank.members]
+    members = [{"id": m.id, "kind": type(m.stream).__name__, "hypotheses": list(m.hypotheses),
+                "outputs": list(m.output_names), "inputs": list(m.input_names), "residuals": list(m.residual_names),
+                "estimates": list(m.estimate_names), "threshold": m.threshold} for m in bank.members]
     return {"members": json.dumps(members), "rate_hz": f"{bank.rate_hz:g}", "block_samples": str(bank.S),
             "decision": json.dumps({"rule": bank.decision.rule, "k": bank.decision.k, "n": bank.decision.n,
                                     "confirm_samples": bank.decision.confirm_samples}),

@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.decision.intervals import clopper_pearson, poisson_rate_interval
+from fdi_sim.decision.persistence import k_of_n
 from fdi_sim.errors import StudyError
 from fdi_sim.sim.bank import LATE_GRACE_S
 from fdi_sim.study.stats import BANK, completed, exposure_s, fault_types, fault_windows
@@ -136,15 +137,10 @@ class Episodes:
 
 
 def persistence(exceed: NDArray[np.bool_], k: int, n: int) -> NDArray[np.bool_]:
-    """k-of-n persistence along the last axis: ``a_j = sum_{i=j-n+1..j} e_i >= k`` (``e_i = 0`` for
-    ``i < 0``: the bank's ring starts empty), the window sum as ``c_j - c_{j-n}`` of the cumulative
-    sum ``c``."""
-    if not 1 <= k <= n:
-        raise ValueError(f"persistence needs 1 <= k <= n, got k={k}, n={n}")
-    c = np.cumsum(exceed, axis=-1, dtype=np.int64)
-    w = c.copy()
-    w[..., n:] -= c[..., :-n]
-    return w >= k
+    """k-of-n persistence along the last axis from an empty window: the one kernel's vectorised
+    twin, :func:`fdi_sim.decision.persistence.k_of_n` (raises ``DesignError``, a ``ValueError``,
+    unless ``1 <= k <= n``)."""
+    return k_of_n(exceed, k, n)
 
 
 def exceedances(stat: NDArray[np.float64], thr: NDArray[np.float64], valid: NDArray[np.bool_],

@@ -348,7 +348,7 @@ def superimpose(log: str | Path | FlightLog, faults: Sequence[Mapping[str, Any]]
     if keep_traces:
         for mid, v in b.trace().items():
             traces[mid] = MappingProxyType({**v, "t_s": t_samples})
-    thresholds = tuple(float(m.stream.threshold) if m.kind != "gust" else float(m.stream._thr[0]) for m in b.members)
+    thresholds = tuple(m.threshold for m in b.members)
     return SuperimposedResult(
         log_path=path, scenario=sc.name, aircraft=sc.aircraft, seed=sc.seed, bank=bank, reconfigure=b.reconfigure,
         detectors=tuple(m.id for m in b.members), thresholds=thresholds, faults=tuple(catalog), steps=K,
