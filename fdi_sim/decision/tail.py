@@ -70,6 +70,9 @@ def tail_threshold(x: NDArray[np.float64], p: float) -> tuple[float, str]:
                           "or longer calibration flights")
     u = float(np.quantile(x, 1.0 - q))
     z = x[x > u] - u
+    if z.size < MIN_TAIL:  # ties at the top (a saturated or discrete statistic): no tail to fit
+        return float(x.max()), (f"degenerate upper tail ({z.size} of {n} samples above the {1 - q:.4f} quantile "
+                                f"{u:.4g}): the training maximum")
     xi, _, sigma = genpareto.fit(z, floc=0.0)
     thr = u + float(genpareto.ppf(1.0 - p / q, xi, loc=0.0, scale=sigma))
     return thr, (f"GPD tail over the {1 - q:.4f} quantile ({z.size} exceedances of {n}), xi {xi:.3f}, sigma "

@@ -108,10 +108,28 @@ def make_kalman_tv(model: LinearModel, process_std: Any = None, sensor_std: Any 
 
 
 def make_mmae(model: LinearModel, alternatives: Mapping[str, LinearModel] | None = None, process_std: Any = None,
-              sensor_std: Any = None, dt_s: float | None = None, alarm_probability: float = 0.95, p_min: float = 1e-4) -> MultipleModelBank:
-    """Multiple-model bank: ``model`` is the nominal hypothesis, ``alternatives`` the others (e.g. ``{"iced": ...}``)."""
+              sensor_std: Any = None, dt_s: float | None = None, alarm_probability: float = 0.95, p_min: float = 1e-4,
+              effectiveness: float = 0.5) -> MultipleModelBank:
+    """Multiple-model bank: ``model`` is the nominal hypothesis, ``alternatives`` the others (e.g. ``{"iced": ...}``).
+
+    Without ``alternatives`` (a scenario file cannot give models) the hypotheses are the classic
+    MMAE actuator set: one model per control input with that input's columns of ``B`` and ``D``
+    scaled by ``effectiveness`` [-] (a loss of effectiveness of ``1 - effectiveness``), named by
+    the input (``elevator_cmd_norm``), the names the bank isolates actuators by."""
     if not alternatives:
-        raise DesignError("kalman-mmae-v1 needs alternatives={'name': LinearModel, ...} besides the nominal model")
+        import dataclasses
+
+        if not 0.0 <= float(effectiveness) < 1.0:
+            raise DesignError(f"effectiveness must be in [0, 1), got {effectiveness}")
+        alternatives = {}
+        for c in model.control_columns():
+            B, D = np.array(model.B, dtype=float), np.array(model.D, dtype=float)
+            B[:, c] *= effectiveness  # B_i = B diag(1, .., e, .., 1): the surface delivers e of the command
+            D[:, c] *= effectiveness
+            alternatives[model.input_names[c]] = dataclasses.replace(model, B=B, D=D)
+        if not alternatives:
+            raise DesignError("kalman-mmae-v1 needs alternatives={'name': LinearModel, ...} or a model with control "
+                              "inputs")
     models = {"nominal": model, **dict(alternatives)}
     designs = [_kalman(m, process_std, sensor_std, dt_s) for m in models.values()]
     return MultipleModelBank(designs, list(models), 0, p_min, alarm_probability)

@@ -410,16 +410,20 @@ class MemberContext:
     meas_names: tuple[str, ...]
     progress: bool
     training_logs: Any
-    _model: Any = None
+    _lm: Any = None
 
-    def model(self) -> Any:
-        """The linear model at the scenario's initial point, at the bank's rate, in the samples' form
-        (:func:`fdi_sim.sim.detect.model_for_scenario`), made once."""
-        if self._model is None:
+    def log_model(self) -> Any:
+        """The scenario's initial point trimmed and linearized (:func:`fdi_sim.sim.detect.model_for_scenario`),
+        made once: ``.model`` at the bank's rate in the samples' form, ``.continuous()``."""
+        if self._lm is None:
             from fdi_sim.sim.detect import model_for_scenario
 
-            self._model = model_for_scenario(self.sc, self.sc.model.fdi.rate_hz).model
-        return self._model
+            self._lm = model_for_scenario(self.sc, self.sc.model.fdi.rate_hz)
+        return self._lm
+
+    def model(self) -> Any:
+        """The linear model at the scenario's initial point, at the bank's rate, in the samples' form."""
+        return self.log_model().model
 
 
 def member_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
@@ -435,7 +439,28 @@ def member_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
     return builder(ctx, m)
 
 
-def _model_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
+def _continuous_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
+    """A detector designed on the continuous linearization, run at the bank's rate (lmi-detection-v1:
+    its LMI is a continuous-time design; the detector card designs it the same way)."""
+    return _model_stream(ctx, m, design_model=ctx.log_model().continuous(),
+                         extra={"dt_s": 1.0 / float(ctx.sc.model.fdi.rate_hz)})
+
+
+def _pca_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
+    """pca-v1: its residual space is learned from data, the first fault-free training flight (the
+    same flights the thresholds are set on; the detector card trains it the same way)."""
+    from fdi_sim.detectors.samples import log_samples
+
+    model = ctx.model()
+    first = next(iter(ctx.training_logs))
+    s = log_samples(first, model, float(ctx.sc.model.fdi.rate_hz))
+    cols = [list(model.input_names).index(nm) for nm in s.input_names]
+    u_abs = s.du + np.asarray(model.u0, dtype=float)[cols]
+    return _model_stream(ctx, m, extra={"train_u": u_abs, "train_y": s.dy + s.y0})
+
+
+def _model_stream(ctx: MemberContext, m: MemberSpec, *, design_model: Any = None,
+                  extra: dict[str, Any] | None = None) -> tuple[Any, str]:
     """A detector designed by its registry factory from the initial point's model. A factory that
     returns a :class:`~fdi_sim.detectors.stream.StreamingDetector` (a plugin's) runs as it is; a
     per-sample detector runs through its compiled stream where one exists
@@ -450,7 +475,8 @@ def _model_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
     model = ctx.model()
     where = f"h {sc.model.initial.h_ft:g} ft"
     try:
-        det = build_detector(DetectorSpec(m.id, params), model)
+        det = build_detector(DetectorSpec(m.id, {**(extra or {}), **params}),
+                             model if design_model is None else design_model)
     except DesignError as exc:
         raise DesignError(f"{sc.source}: {m.id} cannot be designed at the initial point ({where}): {exc}") from None
     if isinstance(det, StreamingDetector):
@@ -548,6 +574,8 @@ def _kinematic_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
 #: how each detector family is designed for a bank (:func:`member_stream`); every other id: its factory
 _DESIGNERS: dict[str, Callable[[MemberContext, MemberSpec], tuple[Any, str]]] = {
     "kalman-gust-v1": _gust_stream,
+    "lmi-detection-v1": _continuous_stream,
+    "pca-v1": _pca_stream,
     **{f"kinematic-{k}-v1": _kinematic_stream for k in ("attitude", "altitude", "airspeed", "flow-angles")},
 }
 
@@ -625,6 +653,10 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
             for i, (mem, s) in enumerate(zip(bank.members, stats)):
                 s = [x[np.isfinite(x)] for x in s]
                 x = np.concatenate(s)
+                if x.size < 2:
+                    raise DesignError(f"{sc.source}: {mem.id} gave {x.size} valid statistic samples on its "
+                                      f"{len(logs)} fault-free training flights (armed from {f.arm_s:g} s): no "
+                                      "threshold can be set; its design does not settle on this aircraft")
                 if episodes:
                     try:
                         thr, method = confident_episode_threshold(series[i], rate, hours[i], rng,
