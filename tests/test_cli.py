@@ -20,11 +20,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_run_info_plugins_scenarios(tmp_path: Path, capsys: pytest.CaptureFixture[str], f16_text: str) -> None:
     scn = tmp_path / "s.toml"
-    # a detector without a streaming kernel is refused before anything flies (exit 2, the fix named)
+    # a detector id nobody registered is refused before anything flies (exit 2, the close id named)
     bad = tmp_path / "bad.toml"
-    bad.write_text(f16_text + '[[detectors]]\ntype = "parity-v1"\n')
+    bad.write_text(f16_text + '[[detectors]]\ntype = "parity-robust-v2"\n')
     assert main(["run", str(bad), "--out", str(tmp_path), "--duration", "3", "--quiet"]) == 2
-    assert "cannot run in the loop" in capsys.readouterr().err and not list(tmp_path.glob("*.mcap"))
+    err = capsys.readouterr().err
+    assert "did you mean parity-robust-v1" in err and not list(tmp_path.glob("*.mcap"))
     # one that has runs in the loop (its threshold set on four short training flights)
     fdi = '[fdi]\ncalibration_flights = 4\ncalibration_duration_s = 40.0\n[[detectors]]\ntype = "kinematic-attitude-v1"\n'
     scn.write_text(f16_text + fdi)

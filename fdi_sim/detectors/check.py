@@ -214,6 +214,9 @@ def _attributes(stream: Any) -> list[ContractFailure]:
         stream.set_threshold(thr * 2.0 + 1.0)
         if float(stream.threshold) != thr * 2.0 + 1.0:
             out.append(ContractFailure("attributes", "set_threshold(x) did not make threshold == x"))
+        stream.set_threshold(math.inf)  # the bank's calibration replays with the threshold at inf
+        if float(stream.threshold) != math.inf:
+            out.append(ContractFailure("attributes", "set_threshold(inf) did not make threshold == inf"))
         stream.set_threshold(thr)
         if not math.isfinite(thr):
             out.append(ContractFailure("attributes", f"threshold {thr} is not finite"))

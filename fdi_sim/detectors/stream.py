@@ -137,7 +137,8 @@ class StreamingDetector(Protocol):
         ...
 
     def set_threshold(self, value: float) -> None:
-        """Set the threshold (every operating point alike)."""
+        """Set the threshold (every operating point alike); ``inf`` must be accepted (the bank
+        records the raw statistic of its calibration flights with it)."""
         ...
 
     def reset(self) -> None:

@@ -216,7 +216,10 @@ def _from_dict(data: Mapping[str, Any], source: str, text: str | None) -> Scenar
                 raise ScenarioError(source, f"{key}.type", "missing or not a string", f"set type to one of: {known}")
             try:
                 spec = registry.get(kind, type_id)
-            except RegistryError:
+            except RegistryError as exc:
+                if "was refused" in str(exc):  # an installed plugin that could not be registered: say why
+                    raise ScenarioError(source, f"{key}.type", str(exc), "fix or uninstall the plugin "
+                                        "(`fdi-sim plugins` lists the refused ones)") from None
                 known = registry.ids(kind)
                 close = difflib.get_close_matches(type_id, known, n=2, cutoff=0.5)
                 fix = (f"did you mean {' or '.join(close)}? " if close else "") + f"known {kind} ids: {', '.join(known) or 'none yet'}"

@@ -298,9 +298,12 @@ def test_threshold(det, flight):
         assert np.array_equal(low.statistic, out.statistic)  # the statistic does not depend on it
         assert np.array_equal(low.hypothesis == 0, low.valid & (low.statistic > 1.0))
         assert (low.hypothesis == 0).sum() > (out.hypothesis == 0).sum()
-        for bad in (0.0, -1.0, float("nan"), float("inf")):
+        for bad in (0.0, -1.0, float("nan")):
             with pytest.raises(ValueError, match="threshold"):
                 det.set_threshold(bad)
+        det.set_threshold(float("inf"))  # the host's calibration replays at inf: never an alarm
+        never = run(det, t, u, y, ok)
+        assert np.array_equal(never.statistic, out.statistic) and np.all(never.hypothesis == -1)
     finally:
         det.set_threshold(10.0)
 

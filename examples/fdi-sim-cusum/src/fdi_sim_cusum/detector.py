@@ -76,10 +76,11 @@ class CusumResidualDetector:
         return self._threshold
 
     def set_threshold(self, value: float) -> None:
-        """Set the alarm threshold ``h`` [-] (positive, finite)."""
+        """Set the alarm threshold ``h`` [-] (positive; ``inf``, never an alarm, is how the host
+        records the raw statistic of its calibration flights)."""
         v = float(value)
-        if not (math.isfinite(v) and v > 0):
-            raise ValueError(f"{self.id}: threshold must be a positive finite number, got {value!r}")
+        if not v > 0:  # (False for NaN too)
+            raise ValueError(f"{self.id}: threshold must be a positive number, got {value!r}")
         self._threshold = v
 
     # --- state -----------------------------------------------------------------------------------
