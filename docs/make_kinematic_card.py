@@ -25,7 +25,7 @@ from fdi_sim.detectors.catalogue_kinematic import KINDS, design
 from fdi_sim.detectors.samples import log_samples
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import loads
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 REPO = Path(__file__).resolve().parents[1]
 AIRCRAFT = {"f16": "scenarios/f16_cruise_doublets.toml", "DHC6": "scenarios/dhc6_cruise_doublets.toml"}
@@ -49,7 +49,7 @@ def fly_text(text: str, aircraft: str, out: Path, seed: int | None = None, durat
         sc = sc.replace(seed=seed)
     if duration_s is not None:
         sc, _ = sc.shortened(duration_s)
-    res = run(sc, out, progress=False)
+    res = fly(sc, out, progress=False)
     log = read_log(res.log_path)
     return log, log_samples(log, MeasurementSet(), RATE_HZ, sensor_rates_hz=sensor_rates(aircraft))
 

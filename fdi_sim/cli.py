@@ -21,7 +21,7 @@ from fdi_sim.threads import one_blas_thread
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from fdi_sim.scenario import load
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
 
     from fdi_sim.scenario.shipped import resolve
 
@@ -33,10 +33,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if dropped:
             print(f"note: --duration {args.duration:g} s drops {dropped} maneuver/fault entries that start later",
                   file=sys.stderr)
-    from fdi_sim.sim.bank_design import bank_members
+    from fdi_sim.bank.members import bank_members
 
     bank_members(sc)  # a detector that cannot run in the loop is refused before anything flies
-    res = run(sc, args.out, log_path=args.log, progress=None if not args.quiet else False, force=args.force)
+    res = fly(sc, args.out, log_path=args.log, progress=None if not args.quiet else False, force=args.force)
     print(res.summary.format())
     print(f"log        {res.log_path}")
     return 0 if res.status == "completed" else 1
@@ -102,7 +102,7 @@ def _cmd_repair(args: argparse.Namespace) -> int:
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:
-    from fdi_sim.sim.detect import DEFAULT_RATE_HZ, SCENARIO_BANK, bank_specs, detect_log, parse_detector_arg, replay_bank
+    from fdi_sim.sim.detect import bank_specs, DEFAULT_RATE_HZ, detect_log, parse_detector_arg, replay_bank, SCENARIO_BANK
 
     if args.bank in (SCENARIO_BANK, "default") and not args.detector:
         if args.out or args.rate_hz:

@@ -20,7 +20,7 @@ passes). The checks (:mod:`fdi_sim.detectors.stream`):
 
 The suite runs it over every registered detector (``tests/detectors/test_contract.py``); a
 bank refuses a plugin whose correctness checks fail, naming the check and the sample
-(:func:`fdi_sim.sim.bank_design.member_stream`).
+(:func:`fdi_sim.training.build.member_stream`).
 """
 from __future__ import annotations
 

@@ -286,7 +286,7 @@ class GustKalmanStream:
     def design_key(self) -> bytes:
         """What the statistic depends on (not the threshold): the matrices, gains, ``Sigma_m^-1`` and
         schedule points, and the window (the bytes the shipped thresholds files' design hashes were
-        made of, :func:`fdi_sim.sim.bank_design.design_hash`)."""
+        made of, :func:`fdi_sim.bank.members.design_hash`)."""
         parts = [np.ascontiguousarray(a, dtype=np.float64).tobytes()
                  for a in (self._A, self._B, self._C, self._D, self._L, self._G, self._Si, self.schedule.points)]
         return b"".join(parts) + str(self.window_n).encode()

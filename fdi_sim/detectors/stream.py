@@ -1,6 +1,6 @@
 """The one streaming contract every detector in a bank implements (built-in and plugin alike).
 
-A bank runs its members block by block (:mod:`fdi_sim.sim.bank`): every ``block_s`` it hands each
+A bank runs its members block by block (:mod:`fdi_sim.bank.runtime`): every ``block_s`` it hands each
 member the block's detector samples, by the time convention of :mod:`fdi_sim.detectors.samples`
 (sample ``j`` pairs the command averaged over the interval ending at ``t_j`` with the measurement
 read at ``t_j``), and the member writes, per sample, its statistic, the threshold it is tested

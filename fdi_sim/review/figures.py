@@ -439,8 +439,8 @@ class _Detection:
 
 def _detection(r: _Run, det: str, st: VectorTopic) -> list[_Detection]:
     """One per injected fault: first alarm at or after onset, delay, isolation (right/wrong), by the
-    rule of the run summary and the review (:func:`fdi_sim.sim.detect.fault_outcome`)."""
-    from fdi_sim.sim.detect import fault_outcome
+    rule of the run summary and the review (:func:`fdi_sim.decision.outcome.fault_outcome`)."""
+    from fdi_sim.decision.outcome import fault_outcome
 
     a = st["alarm"] > 0.5
     iso = st["isolation"] if "isolation" in st.fields else np.full(len(st), -1.0)

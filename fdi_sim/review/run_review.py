@@ -8,10 +8,10 @@ fault-free hour with the exact Poisson (Garwood) interval, next to the bank's de
 
 The numbers follow the live run summary's rules, so a review equals what ``fdi-sim run`` printed:
 
-- detection per (fault, detector): :func:`fdi_sim.sim.detect.fault_outcome` over the logged
+- detection per (fault, detector): :func:`fdi_sim.decision.outcome.fault_outcome` over the logged
   ``alarm`` and ``isolation`` columns of ``/fdi/<id>/statistic``;
 - a false alarm: an alarm episode beginning outside every fault window ``[w0, min(w1, t_end) +
-  LATE_GRACE_S]`` (:func:`fdi_sim.sim.bank.fdi_outcomes`);
+  LATE_GRACE_S]`` (:func:`fdi_sim.bank.runtime.fdi_outcomes`);
 - exposure: the armed fault-free time ``[arm_s, t_end]`` minus those windows
   (:func:`fdi_sim.study.stats.exposure_s`), the rate's denominator.
 
@@ -41,7 +41,8 @@ from fdi_sim.flightlog import (
     repair_log,
 )
 from fdi_sim.flightlog.reader import FlightLog
-from fdi_sim.sim.bank import LATE_GRACE_S, FaultDetection
+from fdi_sim.bank.runtime import FaultDetection
+from fdi_sim.decision.outcome import LATE_GRACE_S
 from fdi_sim.units import S_PER_H
 
 TOPIC_RECONFIGURATION = "/fdi/reconfiguration"
@@ -63,7 +64,7 @@ class FaultInterval:
 class AlarmEpisode:
     """One alarm episode of one detector: onset and end [s] (None: still on at the log's end),
     the last isolated hypothesis, and whether it is a false alarm (begins outside every fault
-    window + :data:`~fdi_sim.sim.bank.LATE_GRACE_S`)."""
+    window + :data:`~fdi_sim.decision.outcome.LATE_GRACE_S`)."""
 
     detector: str
     onset_t_s: float
@@ -460,7 +461,8 @@ def review_log(path: str | Path) -> RunReview:
 
 def review_flight_log(log: FlightLog, path: str, notes: Sequence[str] = ()) -> RunReview:
     """:func:`review_log` of a log already read (``path`` is what the user named)."""
-    from fdi_sim.sim.detect import fault_outcome, fault_windows
+    from fdi_sim.decision.outcome import fault_outcome
+    from fdi_sim.sim.detect import fault_windows
     from fdi_sim.study.stats import exposure_s, merge_episodes, rate
 
     _check_fdi_sim_log(log, path)

@@ -244,7 +244,7 @@ def _from_dict(data: Mapping[str, Any], source: str, text: str | None) -> Scenar
 
 
 #: keys a [[detectors]] entry may carry besides its factory's options (the calibration of
-#: kalman-gust-v1, fdi_sim.sim.calibrate)
+#: kalman-gust-v1, fdi_sim.training.gust)
 DETECTOR_ENTRY_KEYS = ("type", "n_flights", "duration_s", "target")
 
 

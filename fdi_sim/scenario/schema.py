@@ -75,12 +75,12 @@ class LimitsSection(_Section):
 
 class FdiDesignSection(_Section):
     """The conditions the bank is designed and calibrated for, when not the flight's own
-    (``fdi_sim.sim.bank_design.design_scenario``): a Monte Carlo study designs its bank once per
+    (``fdi_sim.training.build.design_scenario``): a Monte Carlo study designs its bank once per
     schedule-grid node at nominal conditions and flies it in the sampled ones."""
 
     point: Literal["flight", "grid"] = Field(
         default="flight", description="design at the flight's initial point, or at the nearest node of the "
-        "aircraft's schedule grid (fdi_sim.sim.designs.DEFAULT_SPACING)")
+        "aircraft's schedule grid (fdi_sim.training.schedule.DEFAULT_SPACING)")
     turbulence: Literal["none", "light", "moderate", "severe"] | None = Field(
         default=None, description="turbulence of the training flights (default: the flight's)")
     wind_speed_kts: float | None = Field(default=None, ge=0.0, le=100.0,
@@ -92,7 +92,7 @@ class FdiDesignSection(_Section):
 
 
 class FdiSection(_Section):
-    """The FDI bank flown in the loop (``fdi_sim.sim.bank``)."""
+    """The FDI bank flown in the loop (``fdi_sim.bank``)."""
 
     bank: Literal["none", "default"] = Field(default="none", description="named bank (per aircraft) or none")
     rate_hz: float = Field(default=20.0, gt=0.0, le=240.0, description="detector rate [Hz]; divides rate_hz")
@@ -116,8 +116,8 @@ class FdiSection(_Section):
     thresholds: str = Field(
         default="default", min_length=1, description="where the members' thresholds come from: \"trained\" (the "
         "bank's own training flights), \"shipped\" (the aircraft's calibration-study file, "
-        "fdi_sim.sim.bank_design.shipped_thresholds_path), a path to such a TOML file (relative to the scenario "
-        "file), or \"default\" (per aircraft: fdi_sim.sim.bank_design.DEFAULT_THRESHOLDS)")
+        "fdi_sim.bank.thresholds_file.shipped_thresholds_path), a path to such a TOML file (relative to the scenario "
+        "file), or \"default\" (per aircraft: fdi_sim.bank.thresholds_file.DEFAULT_THRESHOLDS)")
 
     @model_validator(mode="after")
     def _kn(self) -> "FdiSection":

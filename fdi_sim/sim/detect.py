@@ -25,13 +25,15 @@ from numpy.typing import NDArray
 
 from fdi_sim import registry
 from fdi_sim.detectors.samples import Samples, log_samples, paired_model
-from fdi_sim.errors import DesignError, FdiSimError, LogError, ScenarioError
-from fdi_sim.sim.bank_design import DEFAULT_BANKS
+from fdi_sim.errors import DesignError, LogError, ScenarioError
+from fdi_sim.bank.members import DEFAULT_BANKS
 from fdi_sim.flightlog import METADATA_SCENARIO, TOPIC_FAULT_EVENTS, fdi_topic, read_log
 from fdi_sim.flightlog.copy import NewEventTopic, NewVectorTopic, write_extended
 from fdi_sim.flightlog.reader import FlightLog
 from fdi_sim.flightlog.schemas import ALARM_JSON_SCHEMA, TOPIC_FDI_ALARMS
 from fdi_sim.threads import single_blas_thread
+from fdi_sim.decision.outcome import FaultOutcome, alarm_onsets, fault_outcome
+from fdi_sim.training.gust import CALIBRATION_OPTIONS
 from fdi_sim.units import S_PER_H
 
 DEFAULT_RATE_HZ = 20.0
@@ -113,20 +115,6 @@ class DetectorTrace:
     valid: NDArray[np.bool_]
     isolation: tuple[str | None, ...]
     cost_us_per_sample: float
-
-
-@dataclass(frozen=True)
-class FaultOutcome:
-    """One injected fault as one detector saw it."""
-
-    label: str
-    target: str
-    type: str
-    t_onset_s: float
-    first_alarm_s: float | None
-    delay_s: float | None
-    isolated_as: str | None
-    isolation_correct: bool | None
 
 
 @dataclass(frozen=True)
@@ -288,16 +276,12 @@ def run_detector(det: Any, ident: str, samples: Samples, model: Any) -> Detector
     return DetectorTrace(ident, samples.t_s, stat, thr, alarm, valid, tuple(iso), cost)
 
 
-#: options of kalman-gust-v1's calibration (the rest go to its design)
-CALIBRATION_OPTIONS = ("n_flights", "duration_s", "target")
-
-
 def _run_spec(spec: DetectorSpec, lm: LogModel, log: FlightLog, samples: Samples, rate_hz: float,
               rates: Mapping[str, float]) -> DetectorTrace:
     """Design one detector for this log and run it (vectorised where the detector offers ``run``)."""
     sc = lm.scenario
     if spec.id == "kalman-gust-v1":  # designed at the log's point, calibrated on its fault-free flights
-        from fdi_sim.sim.calibrate import calibrated_gust_kalman
+        from fdi_sim.training.gust import calibrated_gust_kalman
 
         check_options(spec, extra=CALIBRATION_OPTIONS)
         opts = {k: v for k, v in spec.params.items() if k in CALIBRATION_OPTIONS}
@@ -353,57 +337,6 @@ def run_vectorised(det: Any, ident: str, samples: Samples, threshold: float) -> 
     cost = (time.perf_counter() - t0) / max(samples.n, 1) * 1e6
     return DetectorTrace(ident, r.t_s, r.statistic, np.full(samples.n, threshold), np.asarray(r.alarm, dtype=bool),
                          np.asarray(r.valid, dtype=bool), tuple(r.isolation), cost)
-
-
-#: the isolation a fault is reported with: the most frequent one in this time after the first alarm
-ISOLATION_WINDOW_S = 1.0
-
-
-def _matches(isolation: str | None, target: str) -> bool | None:
-    """Whether an isolated hypothesis names the fault's target (None: nothing to compare).
-
-    Hypotheses are signal names: a surface's command (``elevator_cmd_norm`` for ``elevator``), an
-    engine's thrust through the throttle (``throttle_cmd_norm`` for ``engine_<i>`` and
-    ``throttle``), a sensor by its name. Icing (``airframe``) has no hypothesis in any bank: None.
-    """
-    if isolation is None or target in ("airframe", ""):
-        return None
-    if target.startswith("engine_") or target == "throttle":
-        return isolation == "throttle_cmd_norm" or isolation.startswith(("n1_", "torque_", "prop_"))
-    return isolation == target or isolation.startswith(target + "_")
-
-
-def alarm_onsets(alarm: NDArray[np.bool_]) -> int:
-    """Rising edges of an alarm sequence (an alarm at the first sample counts as one)."""
-    a = np.asarray(alarm, dtype=bool)
-    return int(np.count_nonzero(a[1:] & ~a[:-1]) + (int(a[0]) if len(a) else 0))
-
-
-def first_alarm(t_s: NDArray[np.float64], alarm: NDArray[np.bool_], isolation: Sequence[str | None],
-                t_onset_s: float) -> tuple[float | None, str | None]:
-    """The first alarm at or after ``t_onset_s`` [s] and the isolation reported for it: the most
-    frequent hypothesis in the :data:`ISOLATION_WINDOW_S` after it (None: none, or all rejected)."""
-    idx = np.flatnonzero(alarm & (t_s >= t_onset_s))
-    if not idx.size:
-        return None, None
-    t1 = float(t_s[idx[0]])
-    named = [isolation[k] for k in idx if t_s[k] < t1 + ISOLATION_WINDOW_S and isolation[k] is not None]
-    if not named:
-        return t1, None
-    # the most frequent; a tie goes to the one named first (max over a set would follow the
-    # process's string-hash seed: the same log gave nx_g in one process, throttle in another)
-    best = max(named.count(h) for h in named)
-    return t1, next(h for h in named if named.count(h) == best)
-
-
-def fault_outcome(f: Mapping[str, Any], t_s: NDArray[np.float64], alarm: NDArray[np.bool_],
-                  isolation: Sequence[str | None]) -> FaultOutcome:
-    """One injected fault (an entry of :func:`fault_windows`) against an alarm sequence."""
-    t_on = float(f["windows_s"][0][0])
-    t1, iso = first_alarm(t_s, alarm, isolation, t_on)
-    target = f.get("target", "")
-    return FaultOutcome(f["label"], target, f.get("type", ""), t_on, t1, None if t1 is None else t1 - t_on, iso,
-                        _matches(iso, target))
 
 
 def outcome(trace: DetectorTrace, spec: DetectorSpec, faults: Sequence[Mapping[str, Any]], rate_hz: float) -> DetectorOutcome:
@@ -509,7 +442,7 @@ def replay_bank(path: str | Path, bank: str | None = None) -> tuple[DetectReport
     ``/fdi/<id>/statistic`` topic bit for bit (statistic, threshold, decision, isolation, point,
     time) where the log has it.
     """
-    from fdi_sim.sim.bank_design import bank_for_log, replay_log
+    from fdi_sim.training.build import bank_for_log, replay_log
 
     log = read_log(path)
     name, bank = bank, bank_for_log(log, bank=bank, progress=True)

@@ -23,7 +23,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -33,7 +33,7 @@ from fdi_sim.aircraft import (
 )
 from fdi_sim.aircraft.model import wind_ned_fps
 from fdi_sim.aircraft.properties import truth_signals
-from fdi_sim.errors import LogError, SimulationDiverged, TrimError
+from fdi_sim.errors import LogError, ScenarioError, SimulationDiverged, TrimError
 from fdi_sim.faults.injector import FaultInjector
 from fdi_sim.flightlog import (
     FAULT_EVENT_JSON_SCHEMA,
@@ -58,7 +58,8 @@ from fdi_sim.pilot.autopilot import AutopilotGains, AutopilotModes, Pilot, TrimP
 from fdi_sim.scenario import Scenario
 from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
 import fdi_sim.sim._core as _core  # the module itself (from fdi_sim.sim import: a package cycle)
-from fdi_sim.sim.bank import BankAlarm, FaultDetection, FdiBank, fdi_outcomes
+from fdi_sim.bank.members import bank_members
+from fdi_sim.bank.runtime import BankAlarm, FaultDetection, FdiBank, fdi_outcomes
 from fdi_sim.units import DEG_PER_RAD, RAD_PER_DEG
 
 OP_SIGNALS = ("h_ft", "vc_kts", "mach", "alpha_rad", "flaps_deg", "icing_eta")
@@ -313,19 +314,6 @@ MC_FLUSH_PERIOD_S = 10.0
 METADATA_FDI = "fdi"
 
 
-def build_loop_bank(sc: Scenario, sensors: SensorSuite, progress: bool | None) -> FdiBank | None:
-    """The scenario's bank (None without one); designs and calibrations come from the cache or are
-    computed now (training flights, with a progress line on a terminal)."""
-    from fdi_sim.sim.bank_design import bank_members, build_bank
-
-    if not bank_members(sc):
-        return None
-    # the loop's fast path has the pilot write its 8 outputs into the bank's rows: PILOT_FIELDS order
-    return build_bank(sc, meas_names=sensors.names, cmd_names=PILOT_FIELDS,
-                      sensor_rates_hz={s.name: s.rate_hz for s in sensors.specs}, pilot_sensors=sensors.names,
-                      progress=progress is not False)
-
-
 def bank_metadata(bank: FdiBank) -> dict[str, str]:
     """The bank as strings for the log's metadata (what a replay and a reviewer need)."""
     members = [{"id": m.id, "kind": type(m.stream).__name__, "hypotheses": list(m.hypotheses),
@@ -338,9 +326,14 @@ def bank_metadata(bank: FdiBank) -> dict[str, str]:
             "calibration": json.dumps(getattr(bank, "calibration", None))}
 
 
+#: ``bank_builder(sc, sensors, progress) -> FdiBank | None``: designs the scenario's bank when the
+#: loop asks for it (``fdi_sim.training.build.build_loop_bank``; the loop never designs one itself)
+BankBuilder = Callable[[Scenario, SensorSuite, "bool | None"], "FdiBank | None"]
+
+
 def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | None = None,
         progress: bool | None = None, force: bool = False, wall_limit_s: float | None = None,
-        keep_rows: bool = False) -> RunResult:
+        keep_rows: bool = False, bank_builder: BankBuilder | None = None) -> RunResult:
     """Fly a scenario and write its MCAP log.
 
     Parameters
@@ -365,6 +358,11 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         (``RunResult.rows``, as :func:`fdi_sim.flightlog.read_log` would read them back) and
         no per-step topic is written to the file (a scenario with ``log.per_step = false`` keeps
         none).
+    bank_builder : callable, optional
+        Designs the scenario's FDI bank, called after the log is opened and before the trim, with
+        the scenario, its sensor suite and ``progress`` (:func:`fdi_sim.training.fly` passes
+        ``fdi_sim.training.build.build_loop_bank``). Required when the scenario has a bank
+        (``[fdi] bank`` or ``[[detectors]]``): the loop flies banks, it does not design them.
 
     Returns
     -------
@@ -433,7 +431,12 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             sensors = build_sensors(sc, sc.dt_s)
             sensors.reset(np.random.default_rng(ss_sensors))
             # the bank before the aircraft is trimmed: its designs may fly calibration flights
-            bank = build_loop_bank(sc, sensors, progress)
+            if bank_builder is not None:
+                bank = bank_builder(sc, sensors, progress)
+            elif bank_members(sc):
+                raise ScenarioError(sc.source, "fdi", "this scenario has an FDI bank, which fdi_sim.sim.run flies "
+                                    "but does not design", "fly it with fdi_sim.training.fly (as `fdi-sim run` "
+                                    "does), or pass bank_builder")
             per_step = sc.model.log.per_step
             injector = None
             op = sc.operating_point()
@@ -607,7 +610,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     ``steps`` counts the steps whose measurements, commands and (with ``per_step``) log rows are
     complete: rows 0 .. steps-1. A training flight (``run(keep_rows=True)``) passes no truth,
     surface and operating-point channels: their rows are then neither read nor built. With a bank, every detector sample ``j`` is taken at step ``j n``
-    (module :mod:`fdi_sim.sim.bank`): the measurement row before the pilot, the command row after
+    (module :mod:`fdi_sim.bank.runtime`): the measurement row before the pilot, the command row after
     it, the block run before the pilot of its last step (so a reconfiguration acts on that step).
     """
     ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
@@ -662,7 +665,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     if bank is not None:
         n_fdi, K, S = bank.n, bank.K, bank.S
         cmd_rows, meas_rows, valid_rows = bank.cmd_rows, bank.meas_rows, bank.valid_rows
-        # the fast path's rows (build_loop_bank gives the bank PILOT_FIELDS): the pilot's 8 outputs, then the trim
+        # the fast path's rows (training.build.build_loop_bank gives the bank PILOT_FIELDS): the pilot's 8 outputs, then the trim
         cmd_rows[:, 8] = pitch_trim
         cmd_views = [cmd_rows[i] for i in range(K)]
     else:

@@ -72,7 +72,7 @@ def fault_free_flight(name: str, seed: int, duration_s: float, turbulence: str =
 def study_point(name: str, seeds: Sequence[int] = HELD_OUT_SEEDS, duration_s: float = 600.0,
                 progress: bool = True) -> PointResult:
     """Fly the held-out fault-free flights of one scenario; count the alarms."""
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
 
     alarms, by_det, statuses, firsts, hours = 0, {}, {}, [], 0.0
     notes: tuple[str, ...] = ()
@@ -82,7 +82,7 @@ def study_point(name: str, seeds: Sequence[int] = HELD_OUT_SEEDS, duration_s: fl
         for i, seed in enumerate(seeds):
             sc = fault_free_flight(name, seed, duration_s)
             design = sc.model.fdi.far_per_h
-            res = run(sc, tmp, progress=False, force=True)
+            res = fly(sc, tmp, progress=False, force=True)
             s = res.summary
             statuses[res.status] = statuses.get(res.status, 0) + 1
             hours += s.t_end_s / S_PER_H

@@ -14,8 +14,8 @@ rests on the half's largest peak when the target allows less than one alarm), to
 even index, and checked on the odd ones (:func:`check_calibration`: exact
 Poisson interval, scaled by the runs' dispersion); the bank, the OR of its members at their calibrated thresholds under the
 runs' own k-of-n rule, is checked against ``far_per_h`` on both halves. The result
-(:class:`fdi_sim.sim.calibrate.StudyThresholds`) carries the study's name, identity hash, run
-count and flight hours, the design node and :func:`fdi_sim.sim.bank_design.design_hash` of the
+(:class:`fdi_sim.bank.thresholds_file.StudyThresholds`) carries the study's name, identity hash, run
+count and flight hours, the design node and :func:`fdi_sim.bank.members.design_hash` of the
 bank it holds thresholds for.
 """
 from __future__ import annotations
@@ -31,8 +31,8 @@ import numpy as np
 from fdi_sim import __version__
 from fdi_sim.decision.intervals import poisson_rate_interval
 from fdi_sim.errors import StudyError
-from fdi_sim.sim.bank import LATE_GRACE_S
-from fdi_sim.sim.calibrate import HeldRate, StudyMemberThreshold, StudyThresholds
+from fdi_sim.decision.outcome import LATE_GRACE_S
+from fdi_sim.bank.thresholds_file import HeldRate, StudyMemberThreshold, StudyThresholds
 from fdi_sim.study.rescore import (SCALE_NUDGE, _outside, _runs, exceedances, persistence, persistence_level,
                                    rescore)
 from fdi_sim.study.stats import BANK, dispersion, exposure_s, overdispersed_rate, rate_ratio_interval
@@ -387,8 +387,10 @@ def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, spli
         than one design, a study flown with thresholds other than the trained ones.
     """
     from fdi_sim.scenario import load
-    from fdi_sim.sim.bank_design import THRESHOLD_CONFIDENCE, design_hash, design_node, thresholds_source
-    from fdi_sim.sim.run import build_loop_bank, build_sensors
+    from fdi_sim.bank.members import design_hash
+    from fdi_sim.training.thresholds import design_node, THRESHOLD_CONFIDENCE, thresholds_source
+    from fdi_sim.sim.run import build_sensors
+    from fdi_sim.training.build import build_loop_bank
     from fdi_sim.study.execute import load_records
     from fdi_sim.study.stats import completed
 

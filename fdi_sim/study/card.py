@@ -5,7 +5,7 @@ Protocol
 --------
 - Conditions: each aircraft at its cruise scenario's point (F-16 10 kft / 400 KTAS, DHC-6
   5000 ft / 120 KIAS, with the scenario's doublets), turbulence none, light and moderate.
-- Training flights: the scenario without faults, seeds ``1e6 + i`` (``fdi_sim.sim.calibrate``),
+- Training flights: the scenario without faults, seeds ``1e6 + i`` (``fdi_sim.training.flights``),
   ``n_train`` x ``duration_s``. Held-out flights: seeds ``HELD_OUT_SEEDS`` (never used for any
   calibration in the project: the kinematic checks were calibrated on seeds 1-8).
 - Every detector is designed at 20 Hz from the paired model of the point (``kalman-gust-v1`` and
@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -38,11 +38,9 @@ from fdi_sim.errors import FdiSimError
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import Scenario, load
 from fdi_sim.scenario.shipped import shipped_dir
-from fdi_sim.sim.calibrate import DEFAULT_TARGET, fault_free, fly_training, training_seeds
-from fdi_sim.sim.detect import (
-    DetectorSpec, DetectorTrace, LogModel, alarm_onsets, build_detector, fault_outcome, fault_windows,
-    model_for_scenario, run_detector, run_vectorised,
-)
+from fdi_sim.training.flights import DEFAULT_TARGET, fly_training, training_seeds
+from fdi_sim.decision.outcome import alarm_onsets, fault_outcome
+from fdi_sim.sim.detect import build_detector, DetectorSpec, DetectorTrace, fault_windows, LogModel, model_for_scenario, run_detector, run_vectorised
 
 RATE_HZ = 20.0
 HELD_OUT_SEEDS: tuple[int, ...] = tuple(range(101, 109))
@@ -114,7 +112,7 @@ class _Runner:
         sc = lm.scenario
         self._measure = None
         if ident == "kalman-gust-v1":
-            from fdi_sim.sim.calibrate import calibrated_gust_kalman
+            from fdi_sim.training.gust import calibrated_gust_kalman
 
             self.det = calibrated_gust_kalman(sc, lm.continuous(), rate_hz=RATE_HZ, n_flights=len(training),
                                               duration_s=duration_s, target=target, training_logs=training,
@@ -227,11 +225,11 @@ def fault_card(scenario_path: str | Path, ids: Sequence[str], *, n_train: int, d
     """Every detector on one shipped fault scenario; also the traces and thresholds (for figures)."""
     import tempfile
 
-    from fdi_sim.sim.run import run
+    from fdi_sim.training import fly
 
     sc = load(scenario_path)
     with tempfile.TemporaryDirectory() as tmp:
-        res = run(sc, tmp, progress=False)
+        res = fly(sc, tmp, progress=False)
         if res.status == "interrupted":
             raise KeyboardInterrupt(f"{sc.name} interrupted")
         log = read_log(res.log_path)  # a diverged run (the fault's physics) is still a whole log

@@ -75,7 +75,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     else:
         print(format_summary(summary, o))
     if args.calibrate:
-        from fdi_sim.sim.calibrate import write_thresholds
+        from fdi_sim.bank.thresholds_file import write_thresholds
         from fdi_sim.study.calibration import calibrate_study, format_thresholds
 
         t = calibrate_study(out, far_per_h=args.target_per_h)

@@ -189,7 +189,8 @@ def prepare_design(scenario_json: str, source: str) -> dict[str, Any]:
     """Design and calibrate one bank (cached on the worker's disk); returns its notes or the error."""
     from fdi_sim.errors import FdiSimError
     from fdi_sim.scenario.loader import from_dict
-    from fdi_sim.sim.run import build_loop_bank, build_sensors
+    from fdi_sim.sim.run import build_sensors
+    from fdi_sim.training.build import build_loop_bank
 
     sc = from_dict(json.loads(scenario_json), source=source)
     t0 = time.perf_counter()
@@ -209,8 +210,8 @@ def fly_run(index: int, scenario_json: str, source: str, time_limit_s: float, ke
     """
     import traceback
 
+    import fdi_sim.training.build as training_build
     from fdi_sim.scenario.loader import from_dict
-    from fdi_sim.sim.run import run
 
     try:
         from distributed import get_worker
@@ -218,10 +219,8 @@ def fly_run(index: int, scenario_json: str, source: str, time_limit_s: float, ke
         worker = get_worker().address
     except (ImportError, ValueError):
         worker = "local"
-    from fdi_sim.sim import bank_design
-
-    if bank_design.DESIGN_MEMO is None:
-        bank_design.DESIGN_MEMO = {}  # this process flies runs of shared designs
+    if training_build.DESIGN_MEMO is None:
+        training_build.DESIGN_MEMO = {}  # this process flies runs of shared designs
     sc = from_dict(json.loads(scenario_json), source=source)
     rec: dict[str, Any] = {"index": int(index), "seed": int(sc.seed), "scenario": f"{run_name(index)}.toml",
                            "params": params, "duration_s": float(sc.duration_s), "worker": worker}
@@ -230,7 +229,7 @@ def fly_run(index: int, scenario_json: str, source: str, time_limit_s: float, ke
         path = Path(tmp) / f"{run_name(index)}.mcap"
         t0 = time.perf_counter()
         try:
-            res = run(sc, log_path=path, progress=False, wall_limit_s=time_limit_s)
+            res = training_build.fly(sc, log_path=path, progress=False, wall_limit_s=time_limit_s)
         except Exception as exc:  # the flight itself failed: deterministic, recorded, not retried
             rec.update(status="error", reason=f"{type(exc).__name__}: {exc}", t_end_s=0.0, flight_h=0.0,
                        wall_s=time.perf_counter() - t0, log=None, traceback=traceback.format_exc(limit=4))

@@ -1,7 +1,7 @@
 """Re-scoring a finished study at other thresholds and decision rules, without flying again.
 
 Every run's log keeps, per bank member, ``/fdi/<id>/statistic`` at the detector rate
-(:data:`fdi_sim.sim.bank.STAT_FIELDS`). The bank's decision (:func:`fdi_sim.sim.bank._decide`,
+(:data:`fdi_sim.bank.topics.STAT_FIELDS`). The bank's decision (:func:`fdi_sim.bank.runtime._decide`,
 rule ``persistence``) is a function of three of its columns only::
 
     e_j = valid_j and statistic_j > threshold_j          (exceedance)
@@ -24,9 +24,9 @@ exceedance began, which the log does not keep per threshold), nor is the ``angle
 rule (its per-sample direction test is not logged).
 
 Outcomes re-scored per threshold scale (definitions as :mod:`fdi_sim.study.stats`): false alarms
-(episodes beginning outside every fault window + :data:`fdi_sim.sim.bank.LATE_GRACE_S`) per
+(episodes beginning outside every fault window + :data:`fdi_sim.decision.outcome.LATE_GRACE_S`) per
 armed fault-free flight hour, and per (run, fault) the detection: with ``detection =
-"first-alarm"`` (default, the run's own rule :func:`fdi_sim.sim.detect.fault_outcome`) the first
+"first-alarm"`` (default, the run's own rule :func:`fdi_sim.decision.outcome.fault_outcome`) the first
 alarm sample at or after the fault's first onset, so that scale 1 reproduces the records'
 detections; with ``detection = "onset"`` the first episode *beginning* in ``[w0, w1 + grace]`` of
 one of the fault's windows (an alarm already on at the onset does not count). Delays are from
@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from fdi_sim.decision.intervals import clopper_pearson, poisson_rate_interval
 from fdi_sim.decision.persistence import k_of_n
 from fdi_sim.errors import StudyError
-from fdi_sim.sim.bank import LATE_GRACE_S
+from fdi_sim.decision.outcome import LATE_GRACE_S
 from fdi_sim.study.stats import BANK, completed, exposure_s, fault_types, fault_windows
 from fdi_sim.units import S_PER_H
 
@@ -163,7 +163,7 @@ def episodes_of(alarm: NDArray[np.bool_]) -> Episodes:
 
 def alarm_episodes(stat: NDArray[np.float64], thr: NDArray[np.float64], valid: NDArray[np.bool_],
                    k: int, n: int) -> Episodes:
-    """The bank's alarm episodes (:func:`fdi_sim.sim.bank._decide`, rule ``persistence``) from a
+    """The bank's alarm episodes (:func:`fdi_sim.bank.runtime._decide`, rule ``persistence``) from a
     member's statistic, threshold [-] and validity per sample.
 
     Parameters

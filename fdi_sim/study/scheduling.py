@@ -1,7 +1,7 @@
 """Gain scheduling against one design, through a climb (issue 13's scheduling bar).
 
 ``kalman-gust-v1`` designed at every schedule point a climbing, accelerating scenario crosses
-(:func:`fdi_sim.sim.designs.design_schedule`): each point is calibrated (``Sigma_m``, threshold at
+(:func:`fdi_sim.training.schedule.design_schedule`): each point is calibrated (``Sigma_m``, threshold at
 1e-4 per sample) on fault-free flights in steady flight at that point. Two filters are then flown
 through the scenario's own climb on held-out seeds, faults removed:
 
@@ -59,9 +59,9 @@ def compare(name: str = "f16_climb_accelerate", seeds: Sequence[int] = HELD_OUT_
     from fdi_sim.detectors.samples import log_samples
     from fdi_sim.detectors.scheduled import GustKalmanSchedule
     from fdi_sim.flightlog import read_log
-    from fdi_sim.sim import run
-    from fdi_sim.sim.bank import DecisionConfig, _decide
-    from fdi_sim.sim.designs import design_schedule, schedule_points
+    from fdi_sim.training import fly
+    from fdi_sim.bank.runtime import _decide, DecisionConfig
+    from fdi_sim.training.schedule import design_schedule, schedule_points
 
     sc = load(shipped_dir() / f"{name}.toml")
     points = schedule_points(sc)
@@ -76,7 +76,7 @@ def compare(name: str = "f16_climb_accelerate", seeds: Sequence[int] = HELD_OUT_
             d = json.loads(sc.to_json())
             d.update(seed=int(seed), faults=[], detectors=[])
             d.pop("fdi", None)
-            log = read_log(run(from_dict(d, source=f"{sc.source} (seed {seed}, fault-free)"), tmp, progress=False,
+            log = read_log(fly(from_dict(d, source=f"{sc.source} (seed {seed}, fault-free)"), tmp, progress=False,
                                force=True).log_path)
             s = log_samples(log, sched.designs[0].model, sched.designs[0].rate_hz)
             hours += s.n / s.rate_hz / 3600.0

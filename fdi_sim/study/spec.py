@@ -362,9 +362,9 @@ def _drop_none(x: Any) -> Any:
 
 def design_key(sc: Scenario) -> str:
     """What a run's bank is designed and calibrated on, as a hash: runs with one key share a bank
-    (:func:`fdi_sim.sim.bank_design.design_scenario`, without the run's seed, name and duration)."""
-    from fdi_sim.sim.bank_design import design_scenario
-    from fdi_sim.sim.calibrate import fault_free
+    (:func:`fdi_sim.training.build.design_scenario`, without the run's seed, name and duration)."""
+    from fdi_sim.training.build import design_scenario
+    from fdi_sim.training.flights import fault_free
 
     ff = json.loads(fault_free(design_scenario(sc), 0, 1.0).to_json())
     for k in ("name", "description", "maneuvers"):

@@ -5,7 +5,7 @@ Definitions (one per number, so that two studies can be compared):
 - Only runs with status ``completed`` count for rates and probabilities; every status is counted.
 - **Exposure** of a run: the armed, fault-free part of the flight, ``[arm_s, t_end_s]`` minus each
   fault window ``[w0, min(w1, t_end_s) + grace_s]`` (``grace_s`` =
-  :data:`fdi_sim.sim.bank.LATE_GRACE_S`, the rule by which :func:`fdi_sim.sim.bank.fdi_outcomes`
+  :data:`fdi_sim.decision.outcome.LATE_GRACE_S`, the rule by which :func:`fdi_sim.bank.runtime.fdi_outcomes`
   calls an alarm false); before ``arm_s`` the bank never decides (its samples are logged with
   ``valid = 0``). ``exposure_h`` is its sum over the runs [h], ``flight_h`` the whole flights'.
   It includes armed samples at which a member's statistic is not valid yet (a kinematic check's
@@ -15,11 +15,11 @@ Definitions (one per number, so that two studies can be compared):
   ``false_alarms``). ``far_per_h = false_alarms / exposure_h`` with the exact Poisson (Garwood)
   interval; ``p_false_alarm_per_run`` = runs with at least one / runs, Clopper-Pearson interval.
 - **Prediction**: the bank splits its design rate evenly over its members by a union bound
-  (:func:`fdi_sim.sim.bank_design.per_sample_target`), so a member is predicted at most
+  (:func:`fdi_sim.bank.members.per_sample_target`), so a member is predicted at most
   ``design_far_per_h / n_members`` per armed hour and the bank at most ``design_far_per_h``
   (an upper bound: an onset needs an exceedance, persistence needs several).
 - **Detection** (per run and injected fault, the record's ``detections``,
-  :func:`fdi_sim.sim.detect.fault_outcome`): the first alarm sample at or after the fault's first
+  :func:`fdi_sim.decision.outcome.fault_outcome`): the first alarm sample at or after the fault's first
   onset; ``p_detect`` over (run, fault) pairs with its Clopper-Pearson interval; delays [s] as
   median and 95th percentile (linear interpolation between order statistics).
 - **Confusion**: true target -> isolated as -> count, with the columns ``not isolated`` (an alarm
@@ -56,7 +56,7 @@ import numpy as np
 from scipy import stats as scipy_stats
 
 from fdi_sim.decision.intervals import clopper_pearson, poisson_rate_interval
-from fdi_sim.sim.bank import LATE_GRACE_S
+from fdi_sim.decision.outcome import LATE_GRACE_S
 from fdi_sim.units import S_PER_H
 
 COMPLETED = "completed"

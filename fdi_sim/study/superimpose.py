@@ -9,8 +9,8 @@ the suite's output, which is what the pilot and the bank saw), the truth ``x(t)`
 :func:`fdi_sim.sim.run._loop` calls it), so a fault's law, profile, ramp, intermittency, noise
 draws and its sample-and-hold at the sensor's rate (a new value at steps ``k % (rate_sim /
 rate_sensor) == 0`` only) are the in-loop ones; then it replays the faulty rows and the logged
-commands through the bank (:meth:`~fdi_sim.sim.bank.FdiBank.replay`, bit-identical to the loop)
-and scores detections with :func:`~fdi_sim.sim.bank.fdi_outcomes`, the loop's rule.
+commands through the bank (:meth:`~fdi_sim.bank.runtime.FdiBank.replay`, bit-identical to the loop)
+and scores detections with :func:`~fdi_sim.bank.runtime.fdi_outcomes`, the loop's rule.
 
 **Open loop.** The autopilot flew on the healthy sensors. The commands the bank sees are the
 logged fault-free ones, and the flight path is the fault-free one, so a fault's closed-loop
@@ -48,7 +48,7 @@ from fdi_sim.errors import LogError, ScenarioError
 from fdi_sim.flightlog import (
     METADATA_SCENARIO, TOPIC_COMMANDS, TOPIC_SENSORS, TOPIC_SENSORS_VALID, TOPIC_TRUTH_STATE, FlightLog, read_log,
 )
-from fdi_sim.sim.bank import BankAlarm, FaultDetection, fdi_outcomes
+from fdi_sim.bank.runtime import BankAlarm, FaultDetection, fdi_outcomes
 
 #: what every superimposed result says about itself
 OPEN_LOOP_NOTE = (
@@ -109,7 +109,7 @@ class SuperimposedResult:
         Detector sample times [s].
     traces : mapping
         Per member id, the per-sample arrays of ``/fdi/<id>/statistic``
-        (:data:`fdi_sim.sim.bank.TRACE_FIELDS`: ``statistic`` [-], ``threshold`` [-], ``exceedance``,
+        (:data:`fdi_sim.bank.runtime.TRACE_FIELDS`: ``statistic`` [-], ``threshold`` [-], ``exceedance``,
         ``alarm``, ``valid``, ``isolation`` (hypothesis index, -1: none), ``point``) and ``t_s`` [s];
         empty with ``keep_traces=False``.
     alarms : tuple of BankAlarm
@@ -265,7 +265,7 @@ def superimpose(log: str | Path | FlightLog, faults: Sequence[Mapping[str, Any]]
         has no bank with ``bank="scenario"``.
     """
     from fdi_sim.scenario.loader import from_dict
-    from fdi_sim.sim.bank_design import bank_for_log
+    from fdi_sim.training.build import bank_for_log
 
     if bank not in BANKS:
         raise ValueError(f"bank must be one of {BANKS}, got {bank!r}")

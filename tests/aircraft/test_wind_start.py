@@ -17,7 +17,7 @@ from fdi_sim.aircraft.model import wind_ned_fps
 from fdi_sim.flightlog import read_log
 from fdi_sim.operating_point import OperatingPoint
 from fdi_sim.scenario import from_dict
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 POINTS = {"f16": OperatingPoint("f16", 10000.0, vt_kts=400.0), "DHC6": OperatingPoint("DHC6", 5000.0, vc_kts=120.0)}
 
@@ -79,7 +79,7 @@ def test_a_scenario_in_wind_flies_as_in_still_air(tmp_path, extra: dict) -> None
                         "initial": {"h_ft": 5000.0, "vc_kts": 120.0},
                         "atmosphere": {"turbulence": "none", "wind_from_deg": 45.0, "wind_speed_kts": w}, **extra},
                        "wind.toml")
-        out[w] = read_log(run(sc, tmp_path / str(w)).log_path).topics["/truth/state"]
+        out[w] = read_log(fly(sc, tmp_path / str(w)).log_path).topics["/truth/state"]
     assert np.max(np.abs(out[20.0]["vc_kts"] - out[0.0]["vc_kts"])) < 0.05
     assert np.max(np.abs(np.degrees(out[20.0]["beta_rad"] - out[0.0]["beta_rad"]))) < 0.02
     assert np.max(np.abs(np.degrees(out[20.0]["theta_rad"] - out[0.0]["theta_rad"]))) < 0.2

@@ -4,7 +4,7 @@ Issue 13's goal: the full loop with the default bank at >= 0.4 of bare JSBSim's 
 aircraft, measured in the same process, with the log as `fdi-sim run` writes it (every 120 Hz
 topic), with FDI topics only (``[log] per_step = false``), and as a Monte Carlo run writes it
 (``study``: FDI topics without the residuals, what ``fdi_sim.study.spec`` gives a study's runs). Bare
-JSBSim here is what bench_loop.py measures: one command write and one ``run()`` per step, trimmed,
+JSBSim here is what bench_loop.py measures: one command write and one ``fly()`` per step, trimmed,
 moderate turbulence. The bank's designs and thresholds come from the cache (the first run
 calibrates). Then a profile of one full-log run: where the wall time of the loop goes. Never a
 timed assertion in the suite.
@@ -19,7 +19,7 @@ import tempfile
 import time
 
 from fdi_sim.scenario import loads
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 from bench_loop import bare_rate  # the same bare JSBSim loop as bench_loop measures
 
@@ -50,7 +50,7 @@ def scenario(ac: str, T: float, bank: str, per_step: bool, block_s: float = 0.5,
 
 
 def loop_rate(sc, d: str) -> float:
-    res = run(sc, d, progress=False, force=True)
+    res = fly(sc, d, progress=False, force=True)
     return res.summary.steps / res.summary.wall_s
 
 
@@ -64,7 +64,7 @@ def main(T: float = 120.0, repeats: int = 3) -> None:
                                                  ("none", False, 0.5, True), ("default", False, 0.5, True),
                                                  ("default", False, 1.0, True), ("default", False, 0.5, False)):
                 sc = scenario(ac, T, bank, per_step, block, resid)
-                run(scenario(ac, 2.0, bank, per_step, block, resid), d, progress=False, force=True)  # designs, compile
+                fly(scenario(ac, 2.0, bank, per_step, block, resid), d, progress=False, force=True)  # designs, compile
                 bare, loop = [], []
                 for _ in range(repeats):  # interleaved so that machine load hits both alike
                     bare.append(bare_rate(ac, sc, T))
@@ -77,7 +77,7 @@ def main(T: float = 120.0, repeats: int = 3) -> None:
             sc = scenario(ac, T, "default", True)
             prof = cProfile.Profile()
             prof.enable()
-            run(sc, d, progress=False, force=True)
+            fly(sc, d, progress=False, force=True)
             prof.disable()
             s = io.StringIO()
             pstats.Stats(prof, stream=s).sort_stats("tottime").print_stats(14)

@@ -30,7 +30,7 @@ import numpy as np
 from fdi_sim.aircraft import Aircraft, Atmosphere, trim
 from fdi_sim.aircraft.properties import truth_signals
 from fdi_sim.scenario import load, loads
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 SC = """
 name = "bench_{ac}"
@@ -168,7 +168,7 @@ def main(T: float = 120.0, repeats: int = 3) -> None:
         with tempfile.TemporaryDirectory() as d:
             for _ in range(repeats):  # interleaved so machine load hits both alike
                 bare.append(bare_rate(ac, sc, T))
-                res = run(sc, d, progress=False)
+                res = fly(sc, d, progress=False)
                 loop.append(res.summary.steps / res.summary.wall_s)
         b, lp = max(bare), max(loop)
         print(f"{ac:8} {b:13.0f} {lp:13.0f} {lp / b:6.2f} {1e6 / lp - 1e6 / b:17.1f}")

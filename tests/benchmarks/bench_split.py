@@ -27,7 +27,7 @@ from check_study_logs import SCENARIOS, study_text
 from fdi_sim import scenario
 from fdi_sim.aircraft import Aircraft, Atmosphere, trim
 from fdi_sim.aircraft.properties import truth_signals
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 from fdi_sim.sim.run import build_pilot, build_sensors
 
 N_CALLS = 20000
@@ -111,7 +111,7 @@ def _loop_us(sc, short, d: str) -> float:
     c, n = [], []
     for s in (sc, short):
         t0 = time.process_time()
-        r = run(s, d, progress=False).summary
+        r = fly(s, d, progress=False).summary
         c.append(time.process_time() - t0)
         n.append(r.steps)
     return 1e6 * (c[0] - c[1]) / (n[0] - n[1])
@@ -124,7 +124,7 @@ def main(T: float = 600.0, repeats: int = 3) -> None:
         bare, loop, nobank = [], [], []
         short, short_nobank = _study_scenario(name, 60.0), _study_scenario(name, 60.0, bank=False)
         with tempfile.TemporaryDirectory() as d:
-            run(short, d, progress=False)  # the design cached, the kernels loaded
+            fly(short, d, progress=False)  # the design cached, the kernels loaded
             for _ in range(repeats):  # interleaved so machine load hits all alike
                 bare.append(_bare_us(sc, min(T, 120.0)))
                 loop.append(_loop_us(sc, short, d))

@@ -26,7 +26,7 @@ import numpy as np
 
 from fdi_sim import scenario
 from fdi_sim.flightlog import read_log
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
@@ -62,7 +62,7 @@ def fly_all(pattern: str = "*.toml") -> dict[str, dict]:
         for path in sorted(SCENARIOS.glob(pattern)):
             t0 = time.perf_counter()
             sc = scenario.load(path)
-            res = run(sc, d, progress=False)
+            res = fly(sc, d, progress=False)
             out[path.name] = {"status": res.status, "steps": res.summary.steps, **fingerprint(res.log_path)}
             print(f"{path.name:34} {res.status:10} {res.summary.steps:6d} steps  {time.perf_counter() - t0:6.1f} s",
                   flush=True)

@@ -80,10 +80,10 @@ def test_confident_threshold_covers_correlated_flights():
 
 def test_persistence_series_exceeds_exactly_where_the_bank_alarms():
     """k-of-n: the series from :func:`persistence_series` is above a threshold exactly at the
-    samples where the bank's own decision kernel (``fdi_sim.sim.bank._decide``) has its alarm on,
+    samples where the bank's own decision kernel (``fdi_sim.bank.runtime._decide``) has its alarm on,
     with invalid samples and a ring that starts empty."""
     from fdi_sim.decision.tail import persistence_series
-    from fdi_sim.sim.bank import _decide
+    from fdi_sim.bank.runtime import _decide
 
     rng = np.random.default_rng(4)
     for k, n in [(1, 1), (3, 5), (2, 2), (4, 7)]:

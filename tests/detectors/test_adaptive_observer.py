@@ -361,7 +361,7 @@ def jsbsim_flights(tmp_path_factory) -> dict:
     from fdi_sim.linear.linearize import linearize
     from fdi_sim.operating_point import OperatingPoint
     from fdi_sim.scenario import loads
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
 
     out = {}
     for ac, op, init in (("f16", OperatingPoint("f16", 10000.0, vt_kts=400.0), "h_ft = 10000.0\nvt_kts = 400.0"),
@@ -369,7 +369,7 @@ def jsbsim_flights(tmp_path_factory) -> dict:
         model = linearize(Aircraft(ac), op).model
         text = (f'name = "ao_{ac}"\naircraft = "{ac}"\nduration_s = 10.0\nseed = 3\n[initial]\n{init}\n'
                 '[atmosphere]\nturbulence = "light"\n')
-        res = run(loads(text, "ao.toml"), tmp_path_factory.mktemp(ac))
+        res = fly(loads(text, "ao.toml"), tmp_path_factory.mktemp(ac))
         log = read_log(res.log_path)
         meas, cmd = log.topics["/sensors/measurements"], log.topics["/commands/pilot"]
         y = np.stack([meas[o] for o in model.output_names], axis=1)

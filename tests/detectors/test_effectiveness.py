@@ -23,8 +23,8 @@ from fdi_sim.errors import DesignError, SimulationDiverged
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import load
 from fdi_sim.scenario.loader import from_dict
-from fdi_sim.sim import run
-from fdi_sim.sim.calibrate import fault_free
+from fdi_sim.training import fly
+from fdi_sim.training.flights import fault_free
 from fdi_sim.sim.detect import model_for_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -45,13 +45,13 @@ def _scenario(path: Path | None = None, sc=None, **changes):
 def _design(sc):
     lm = model_for_scenario(sc, RATE_HZ)
     turb = sc.model.atmosphere.turbulence
-    # as fdi_sim.sim.calibrate.calibrated_gust_kalman: a calm-air design still carries light gusts
+    # as fdi_sim.training.gust.calibrated_gust_kalman: a calm-air design still carries light gusts
     return make_gust_kalman(lm.continuous(), rate_hz=RATE_HZ, sim_rate_hz=sc.model.rate_hz,
                             turbulence=turb if turb != "none" else "light").design
 
 
 def _fly(sc, tmp: Path, design):
-    log = read_log(run(sc, tmp, progress=False).log_path)
+    log = read_log(fly(sc, tmp, progress=False).log_path)
     return log_samples(log, design.model, RATE_HZ)
 
 

@@ -19,8 +19,9 @@ from fdi_sim.flightlog import read_log
 from fdi_sim.linear.grid import parse_grid_spec
 from fdi_sim.linear.linearize import linearize_grid
 from fdi_sim.scenario import load
-from fdi_sim.sim import run
-from fdi_sim.sim.calibrate import calibrated_gust_kalman, fault_free
+from fdi_sim.training import fly
+from fdi_sim.training.flights import fault_free
+from fdi_sim.training.gust import calibrated_gust_kalman
 from fdi_sim.sim.detect import fault_windows
 
 REPO = Path(__file__).resolve().parents[2]
@@ -40,8 +41,8 @@ def stuck_elevator(tmp_path_factory: pytest.TempPathFactory):
     cont = sched.continuous_at(sc.operating_point())
     det = calibrated_gust_kalman(sc, cont, rate_hz=20.0, use_cache=False, progress=False)  # 24 x 300 s, 1e-4
     out = tmp_path_factory.mktemp("gust")
-    held = [read_log(run(fault_free(sc, seed, 300.0), out, progress=False).log_path) for seed in (1, 2, 3)]
-    faulty = read_log(run(sc, out, progress=False).log_path)
+    held = [read_log(fly(fault_free(sc, seed, 300.0), out, progress=False).log_path) for seed in (1, 2, 3)]
+    faulty = read_log(fly(sc, out, progress=False).log_path)
     return sc, det, held, faulty
 
 

@@ -15,8 +15,8 @@ from fdi_sim.detectors.scheduled import GustKalmanSchedule
 from fdi_sim.errors import DesignError
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import load
-from fdi_sim.sim import run
-from fdi_sim.sim.calibrate import fault_free
+from fdi_sim.training import fly
+from fdi_sim.training.flights import fault_free
 from fdi_sim.sim.detect import model_for_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -36,7 +36,7 @@ def flight(tmp_path_factory):
     # the design's own (analytic) calibration, lowered so that the bias and some turbulence alarm
     cal = replace(analytic_calibration(det.design, 1e-4), threshold=60.0)
     det = type(det)(det.design, cal)
-    log = read_log(run(sc, tmp_path_factory.mktemp("gk"), progress=False).log_path)
+    log = read_log(fly(sc, tmp_path_factory.mktemp("gk"), progress=False).log_path)
     return det, log_samples(log, det.design.model, 20.0)
 
 

@@ -4,7 +4,7 @@ Short version of ``docs/make_kinematic_card.py``: per aircraft two calibration a
 60 s fault-free flights in moderate turbulence (threshold at the empirical 1 - 1e-3 quantile, the
 held-out false-alarm fraction's Clopper-Pearson 95 % interval must reach down to the target), the
 three shipped sensor-fault scenarios shortened (detected, no alarm before onset, isolated to the
-right sensor), step() against run(), the registry, a missing signal.
+right sensor), step() against fly(), the registry, a missing signal.
 """
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ from fdi_sim.errors import DesignError, FdiSimError
 from fdi_sim.flightlog import read_log
 from fdi_sim.isa import vt_from_vc
 from fdi_sim.scenario import loads
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 from fdi_sim.units import KT_PER_FPS
 
 REPO = Path(__file__).resolve().parents[2]
@@ -48,7 +48,7 @@ def _fly(text: str, ac: str, out: Path, seed: int | None = None, duration_s: flo
         sc = sc.replace(seed=seed)
     if duration_s is not None:
         sc, _ = sc.shortened(duration_s)
-    log = read_log(run(sc, out, progress=False).log_path)
+    log = read_log(fly(sc, out, progress=False).log_path)
     return log, log_samples(log, MeasurementSet(), RATE_HZ, sensor_rates_hz=_rates(ac))
 
 

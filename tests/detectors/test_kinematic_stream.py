@@ -32,8 +32,8 @@ from fdi_sim.detectors.samples import Samples, log_samples
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import from_dict, load
 from fdi_sim.sensors import load_suite
-from fdi_sim.sim import run
-from fdi_sim.sim.calibrate import fault_free
+from fdi_sim.training import fly
+from fdi_sim.training.flights import fault_free
 
 REPO = Path(__file__).resolve().parents[2]
 RATE_HZ = 20.0
@@ -92,7 +92,7 @@ def _fly(name: str, out: Path) -> Flight:
         data = json.loads(sc.to_json())
         data["faults"] = data["faults"] + extra
         sc = from_dict(data, source=f"{path} (with dropouts)")
-    res = run(sc, out, progress=False)
+    res = fly(sc, out, progress=False)
     return Flight(Path(res.log_path), sc.aircraft, sc.model.atmosphere.turbulence)
 
 

@@ -18,7 +18,7 @@ from fdi_sim.flightlog import read_log
 from fdi_sim.linear.grid import parse_grid_spec
 from fdi_sim.linear.linearize import linearize_grid
 from fdi_sim.scenario import loads
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -29,7 +29,7 @@ def calm_flight(tmp_path_factory: pytest.TempPathFactory):
     text = text.replace('turbulence = "moderate"', 'turbulence = "none"').replace(
         'suite = "default"', 'suite = "default"\nbiases = false')
     sc, _ = loads(text).shortened(12.0)
-    res = run(sc, tmp_path_factory.mktemp("calm"), progress=False)
+    res = fly(sc, tmp_path_factory.mktemp("calm"), progress=False)
     sched = linearize_grid(parse_grid_spec("h_ft=10000;vt_kts=400", "f16"), validate=False)
     return read_log(res.log_path), sched, sc.operating_point()
 

@@ -238,10 +238,10 @@ def test_bad_sources_and_destinations(tmp_path: Path) -> None:
 def run_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 3 s real F-16 run (JSBSim, the real writer)."""
     from fdi_sim.scenario import load
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
     sc, _ = load(REPO / "scenarios/f16_cruise_doublets.toml").shortened(3.0)
     path = tmp_path_factory.mktemp("repair") / "run.mcap"
-    run(sc, log_path=path)
+    fly(sc, log_path=path)
     return path
 
 

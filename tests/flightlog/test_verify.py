@@ -33,10 +33,10 @@ FLIPS_PER_PART = 24
 def real_log(tmp_path_factory: pytest.TempPathFactory) -> bytes:
     """A 3 s real F-16 run (JSBSim, the real writer)."""
     from fdi_sim.scenario import load
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
     sc, _ = load(REPO / "scenarios/f16_cruise_doublets.toml").shortened(3.0)
     path = tmp_path_factory.mktemp("verify") / "run.mcap"
-    run(sc, log_path=path)
+    fly(sc, log_path=path)
     return path.read_bytes()
 
 

@@ -80,9 +80,9 @@ phi_max_deg = 60.0
 
 def _fly(text: str, log: Path, **kw: object) -> Path:
     from fdi_sim.scenario import loads
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
 
-    run(loads(text), log.parent, log_path=log, progress=False, force=True, **kw)
+    fly(loads(text), log.parent, log_path=log, progress=False, force=True, **kw)
     return log
 
 

@@ -159,9 +159,9 @@ def test_values_round_to_six_digits_and_nan_is_null() -> None:
 # --- figures from real flights --------------------------------------------------------------------
 def _fly(text: str, path: Path) -> Path:
     from fdi_sim.scenario import loads
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
 
-    run(loads(text), path.parent, log_path=path, progress=False, force=True)
+    fly(loads(text), path.parent, log_path=path, progress=False, force=True)
     return path
 
 
@@ -235,7 +235,7 @@ def test_the_fault_band_spans_exactly_the_catalog_window(logs: dict[str, FlightL
 
 
 def test_statistic_threshold_and_alarms_are_the_logged_ones(logs: dict[str, FlightLog]) -> None:
-    from fdi_sim.sim.detect import first_alarm
+    from fdi_sim.decision.outcome import first_alarm
 
     log = logs["gyro"]
     sections = report_sections([log], ["gyro"])

@@ -32,11 +32,11 @@ def test_numbers_equal_the_live_run_summary(tmp_path: Path) -> None:
     """The review's detections, alarm episodes and false alarms are the live run summary's, from
     the log alone (a real 20 s F-16 flight with the bank in the loop)."""
     from fdi_sim.scenario import loads
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
 
     text = (ROOT / "scenarios" / "f16_pitch_gyro_bias.toml").read_text()
     sc, _ = loads(text.replace("seed = 12", "seed = 5")).shortened(20.0)
-    res = run(sc, tmp_path, progress=False)
+    res = fly(sc, tmp_path, progress=False)
     s = res.summary
     rev = review_log(res.log_path)
     assert rev.status == s.status == "completed"

@@ -19,7 +19,7 @@ from fdi_sim.faults.quantities import native_unit
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import from_dict
 from fdi_sim.sensors import load_suite
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 GAUGES = ("n1_0_pct", "n1_1_pct", "torque_0_ftlb", "torque_1_ftlb", "prop_0_rpm", "prop_1_rpm")
 POINT = {"h_ft": 5000.0, "vc_kts": 120.0}
@@ -30,7 +30,7 @@ FTLBPS_PER_HP = 550.0
 def _fly(tmp: Path, name: str, *, faults: list[dict] = (), duration_s: float = 6.0, seed: int = 1) -> dict:
     sc = from_dict({"name": name, "aircraft": "DHC6", "duration_s": duration_s, "seed": seed, "initial": POINT,
                     "autopilot": {"altitude": False, "airspeed": False, "lateral": False}, "faults": list(faults)})
-    res = run(sc, log_path=tmp / f"{name}.mcap", progress=False)
+    res = fly(sc, log_path=tmp / f"{name}.mcap", progress=False)
     assert res.status == "completed", res.summary.reason
     log = read_log(res.log_path)
     return {"path": res.log_path, "truth": log.topics["/truth/state"], "meas": log.topics["/sensors/measurements"],

@@ -14,8 +14,8 @@ from fdi_sim.errors import ScenarioError
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import load, loads
 from fdi_sim.scenario.loader import from_dict
-from fdi_sim.sim import run
-from fdi_sim.sim.bank_design import replay_log
+from fdi_sim.training import fly
+from fdi_sim.training.build import replay_log
 from fdi_sim.sim.detect import replay_bank
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -33,7 +33,7 @@ def _with_bank(path: str, **fdi) -> object:
 @pytest.fixture(scope="module")
 def gyro_run(tmp_path_factory):
     sc = _with_bank("f16_pitch_gyro_bias.toml", reconfigure=False)
-    return run(sc, tmp_path_factory.mktemp("bank"), progress=False)
+    return fly(sc, tmp_path_factory.mktemp("bank"), progress=False)
 
 
 def test_gyro_bias_is_detected_isolated_and_logged(gyro_run):
@@ -90,13 +90,13 @@ def test_monte_carlo_log_holds_only_the_fdi_topics(tmp_path):
     sc = _with_bank("f16_pitch_gyro_bias.toml", reconfigure=False)
     d = json.loads(sc.to_json())
     d["log"] = {"per_step": False}
-    res = run(from_dict(d, source="mc"), tmp_path, progress=False)
+    res = fly(from_dict(d, source="mc"), tmp_path, progress=False)
     log = read_log(res.log_path)
     assert res.summary.steps == 7201
     assert not any(t.startswith(("/truth", "/sensors", "/commands", "/surfaces")) for t in log.topics)
     assert "/fdi/kinematic-attitude-v1/statistic" in log.topics and "/sim/status" in log.topics
     full = _with_bank("f16_pitch_gyro_bias.toml", reconfigure=False)
-    res_full = run(full, tmp_path / "full", progress=False)
+    res_full = fly(full, tmp_path / "full", progress=False)
     a, b = read_log(res.log_path), read_log(res_full.log_path)
     for mid in res.summary.fdi_detectors:  # the log level does not change what the bank computes
         t = f"/fdi/{mid}/statistic"
@@ -120,7 +120,7 @@ def test_reconfiguration_holds_the_airspeed_after_isolation(tmp_path):
     for rc in (True, False):
         sc = _with_bank("dhc6_airspeed_drift.toml", reconfigure=rc)
         sc = sc.replace(duration_s=300.0)
-        runs[rc] = run(sc, tmp_path / str(rc), progress=False)
+        runs[rc] = fly(sc, tmp_path / str(rc), progress=False)
     on = runs[True].summary
     assert [r["sensor"] for r in on.fdi_reconfigurations] == ["vc_kts"]
     t_rc = on.fdi_reconfigurations[0]["t_s"]
@@ -150,7 +150,7 @@ def test_bad_fdi_sections(f16_text, fdi, key, words):
 def test_a_decision_rule_that_needs_fault_directions(tmp_path, f16_text):
     sc = loads(f16_text + '[fdi]\nbank = "default"\ndecision = "angle-magnitude"\n')
     with pytest.raises(ScenarioError, match="fault directions"):
-        run(sc, tmp_path, progress=False)
+        fly(sc, tmp_path, progress=False)
     assert not list(tmp_path.iterdir())  # no log, and no temporary one either
 
 
@@ -161,7 +161,7 @@ def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
     from scipy.stats import chi2
 
     from fdi_sim.decision.persistence import persistence_false_alarm
-    from fdi_sim.sim.bank import _decide
+    from fdi_sim.bank.runtime import _decide
 
     rng = np.random.default_rng(8)
     N, k, n, p = 400_000, 2, 5, 0.05
@@ -198,7 +198,7 @@ def test_gain_scheduled_bank_in_the_loop_equals_its_replay(tmp_path):
     """f16_climbing_turn climbs 10 kft -> 12 kft: kalman-gust-v1 is scheduled over two points, the
     active point changes during the flight, and the replay gives the same bits."""
     sc = _with_bank("f16_climbing_turn.toml", reconfigure=False)
-    res = run(sc, tmp_path, progress=False)
+    res = fly(sc, tmp_path, progress=False)
     assert res.status == "completed"
     assert any("gain-scheduled over" in n for n in res.summary.fdi_notes)
     log = read_log(res.log_path)
@@ -230,7 +230,7 @@ def test_actuator_reconfiguration_makes_up_a_lost_elevator(tmp_path):
             d = json.loads(sc.to_json())
             d["faults"] = []
             sc = from_dict(d, source="fault-free")
-        res = run(sc, tmp_path / str(rc), progress=False)
+        res = fly(sc, tmp_path / str(rc), progress=False)
         surf = read_log(res.log_path).topics["/truth/surfaces"]
         m = (surf.t_s >= 16.0) & (surf.t_s < 19.0)
         e = surf["elevator_pos_rad"][m]

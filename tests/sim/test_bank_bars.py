@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from fdi_sim.scenario import load
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 from fdi_sim.study.bank_false_alarms import HELD_OUT_SEEDS, POINTS, study_point
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -20,7 +20,7 @@ FAULT_SCENARIOS = sorted(p.stem for p in (ROOT / "scenarios").glob("*.toml") if 
 def test_shipped_fault_scenario_detected_and_isolated(tmp_path, name):
     sc = load(ROOT / "scenarios" / f"{name}.toml")
     assert sc.model.fdi.bank == "default"  # shipped with the bank a new user gets
-    res = run(sc, tmp_path, progress=False)
+    res = fly(sc, tmp_path, progress=False)
     s = res.summary
     # the F-16 departs without a moving stabilator (the scenario says so): the log ends 'diverged'
     assert res.status == ("diverged" if name in DEPARTS else "completed"), s.reason

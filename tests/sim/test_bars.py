@@ -8,7 +8,7 @@ import pytest
 
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import loads
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 HOLD = """
 name = "hold_{ac}"
@@ -34,7 +34,7 @@ def _hold(tmp_path: Path, ac: str, h: float, speed: str, seed: int):
     can track a gust, and MIL-F-8785C moderate turbulence alone moves the airspeed by ~5 kt rms).
     """
     sc = loads(HOLD.format(ac=ac, seed=seed, h=h, speed=speed))
-    res = run(sc, tmp_path, progress=False)
+    res = fly(sc, tmp_path, progress=False)
     s = res.summary
     assert res.status == "completed", s.reason
     assert s.max_abs_dh_ft < 100.0
@@ -71,9 +71,9 @@ def _payloads(path: Path) -> dict[str, np.ndarray]:
 
 def test_same_seed_same_log_other_seed_differs(tmp_path: Path, f16_text: str) -> None:
     sc = loads(f16_text)
-    a = _payloads(run(sc, tmp_path / "a", progress=False).log_path)
-    b = _payloads(run(sc, tmp_path / "b", progress=False).log_path)
-    c = _payloads(run(sc.replace(seed=8), tmp_path / "c", progress=False).log_path)
+    a = _payloads(fly(sc, tmp_path / "a", progress=False).log_path)
+    b = _payloads(fly(sc, tmp_path / "b", progress=False).log_path)
+    c = _payloads(fly(sc.replace(seed=8), tmp_path / "c", progress=False).log_path)
     assert a.keys() == b.keys()
     for topic in a:
         assert a[topic].tobytes() == b[topic].tobytes(), topic
@@ -85,7 +85,7 @@ def test_divergence_ends_cleanly_with_readable_log(tmp_path: Path) -> None:
     """DHC-6 with the autopilot off in severe turbulence departs; the run says so and the log reads."""
     sc = loads(HOLD.format(ac="DHC6", seed=1, h=5000.0, speed="vc_kts = 120.0").replace('"moderate"', '"severe"')
                + "\n[autopilot]\naltitude = false\nairspeed = false\nlateral = false\n[limits]\nphi_max_deg = 60.0\n")
-    res = run(sc, tmp_path, progress=False)
+    res = fly(sc, tmp_path, progress=False)
     assert res.status == "diverged"
     assert "bank" in res.summary.reason or "non-finite" in res.summary.reason
     log = read_log(res.log_path)
@@ -113,7 +113,7 @@ def test_ctrl_c_ends_the_run_cleanly(tmp_path: Path, f16_text: str, monkeypatch:
         return step
 
     monkeypatch.setattr(Aircraft, "stepper", stepper_then_interrupt)
-    res = run(loads(f16_text), tmp_path, progress=False)
+    res = fly(loads(f16_text), tmp_path, progress=False)
     assert res.status == "interrupted"
     log = read_log(res.log_path)  # a complete file (summary present), not one needing repair
     assert log.topics["/truth/state"].t_s[-1] == pytest.approx(599 / 120)

@@ -1,5 +1,5 @@
 """The calibration cache's lock: a second process that needs an entry another is computing waits for it
-and reads it, instead of flying the same training flights (fdi_sim.sim.calibrate.cache_lock)."""
+and reads it, instead of flying the same training flights (fdi_sim.training.cache.cache_lock)."""
 from __future__ import annotations
 
 import subprocess
@@ -7,12 +7,12 @@ import sys
 import time
 from pathlib import Path
 
-from fdi_sim.sim.calibrate import cache_lock
+from fdi_sim.training.cache import cache_lock
 
 HOLD = """
 import sys, time
 from pathlib import Path
-from fdi_sim.sim.calibrate import cache_lock
+from fdi_sim.training.cache import cache_lock
 entry = Path(sys.argv[1])
 with cache_lock(entry):
     print("locked", flush=True)

@@ -1,4 +1,4 @@
-"""Gain-schedule designs of kalman-gust-v1 (fdi_sim.sim.designs): the points a scenario crosses, one design
+"""Gain-schedule designs of kalman-gust-v1 (fdi_sim.training.schedule): the points a scenario crosses, one design
 and one cached calibration per point, refusing or skipping a point that cannot be trimmed (real JSBSim)."""
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 
 from fdi_sim.errors import DesignError
 from fdi_sim.scenario import load
-from fdi_sim.sim import calibrate as calibrate_mod
-from fdi_sim.sim.designs import DEFAULT_SPACING, DesignPoint, design_schedule, point_scenario, schedule_points
+from fdi_sim.training import flights, gust, schedule
+from fdi_sim.training.schedule import DEFAULT_SPACING, design_schedule, DesignPoint, point_scenario, schedule_points
 
 REPO = Path(__file__).resolve().parents[2]
 SCENARIOS = REPO / "scenarios"
@@ -28,7 +28,9 @@ def _no_flights(monkeypatch: pytest.MonkeyPatch) -> None:
     def refuse(*args: object, **kwargs: object) -> None:
         raise AssertionError("flew a training flight although the calibration should come from the cache")
 
-    monkeypatch.setattr(calibrate_mod, "fly_training", refuse)
+    for mod in (flights, gust, schedule):  # every module that flies them by that name
+        if hasattr(mod, "fly_training"):
+            monkeypatch.setattr(mod, "fly_training", refuse)
 
 
 # ------------------------------------------------------------------------- schedule points

@@ -18,9 +18,9 @@ from fdi_sim import registry
 from fdi_sim.detectors.check import CORRECTNESS, check_stream, contract_inputs
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario.loader import from_dict, load
-from fdi_sim.sim.bank_design import bank_for_log
+from fdi_sim.training.build import bank_for_log
 from fdi_sim.sim.detect import model_for_scenario, replay_bank
-from fdi_sim.sim.run import run
+from fdi_sim.training import fly
 
 ROOT = Path(__file__).resolve().parents[2]
 #: one shipped fault scenario per aircraft, flown in moderate turbulence for 40 s (fault at 10 s)
@@ -44,7 +44,7 @@ def every_detector_scenario(aircraft: str):
 def flown(request, tmp_path_factory):
     sc = every_detector_scenario(request.param)
     out = tmp_path_factory.mktemp(f"every-{request.param}")
-    res = run(sc, out, log_path=out / f"{sc.name}.mcap", progress=False)
+    res = fly(sc, out, log_path=out / f"{sc.name}.mcap", progress=False)
     return request.param, sc, res
 
 

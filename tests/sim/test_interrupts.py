@@ -210,14 +210,15 @@ def test_a_stop_whose_exception_was_dropped_still_stops_the_run(tmp_path: Path, 
     (``fdi_sim.signals``): a run started after such a drop stops before take-off, the old log kept."""
     from fdi_sim import signals
     from fdi_sim.scenario import load
-    from fdi_sim.sim.run import RunInterrupted, run
+    from fdi_sim.sim.run import RunInterrupted
+    from fdi_sim.training import fly
 
     old = _good_log(tmp_path)
     scn = tmp_path / "long.toml"
     scn.write_text(LONG_SCENARIO)
     monkeypatch.setattr(signals, "pending_reason", "stopped by SIGTERM")
     with pytest.raises(RunInterrupted, match="SIGTERM"):
-        run(load(scn), log_path=tmp_path / "keep.mcap", progress=False)
+        fly(load(scn), log_path=tmp_path / "keep.mcap", progress=False)
     assert (tmp_path / "keep.mcap").read_bytes() == old
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import load
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 
 SCENARIOS = sorted((Path(__file__).resolve().parents[2] / "scenarios").glob("*.toml"))
 
@@ -16,7 +16,7 @@ SCENARIOS = sorted((Path(__file__).resolve().parents[2] / "scenarios").glob("*.t
 def test_scenario_flies(tmp_path: Path, path: Path) -> None:
     sc = load(path)
     sc, _ = sc.shortened(min(sc.duration_s, 20.0))
-    res = run(sc, tmp_path, progress=False)
+    res = fly(sc, tmp_path, progress=False)
     assert res.status == "completed", res.summary.reason
     log = read_log(res.log_path)
     assert log.metadata["scenario"]["name"] == sc.name

@@ -84,7 +84,7 @@ def fly_results(out_dir: Path, cache_dir: Path, *, n_free: int = 6, faults: Sequ
     first run, and shared by the others).
     """
     import fdi_sim.scenario
-    import fdi_sim.sim
+    import fdi_sim.training
 
     runs = Path(out_dir) / "runs"
     runs.mkdir(parents=True, exist_ok=True)
@@ -97,7 +97,7 @@ def fly_results(out_dir: Path, cache_dir: Path, *, n_free: int = 6, faults: Sequ
             path = runs / f"{i:06d}.toml"
             path.write_text(BASE.format(index=i, seed=seed0 + i, duration_s=duration_s) + text)
             sc = fdi_sim.scenario.load(path)
-            res = fdi_sim.sim.run(sc, log_path=runs / f"{i:06d}.mcap", progress=False)
+            res = fdi_sim.training.fly(sc, log_path=runs / f"{i:06d}.mcap", progress=False)
             rec = record_of(i, res, sc)
             (runs / f"{i:06d}.json").write_text(json.dumps(rec, indent=1, sort_keys=True))
             records.append(rec)

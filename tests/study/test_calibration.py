@@ -56,7 +56,7 @@ def study(tmp_path_factory: pytest.TempPathFactory):
 
 
 def test_the_file_reads_back_to_what_the_study_gives(study) -> None:
-    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.bank.thresholds_file import read_thresholds
     from fdi_sim.study.calibration import calibrate_study
     from fdi_sim.study.execute import load_records
 
@@ -71,7 +71,7 @@ def test_the_file_reads_back_to_what_the_study_gives(study) -> None:
 
 
 def test_calibrated_thresholds_meet_the_target_on_their_half_and_are_rescored_on_the_other(study) -> None:
-    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.bank.thresholds_file import read_thresholds
     from fdi_sim.study.execute import load_records
     from fdi_sim.study.rescore import rescore
 
@@ -112,12 +112,12 @@ def _run_scenario(out: Path, tmp: Path, thresholds: str, **initial: float) -> Pa
 def test_a_bank_with_the_file_flies_exactly_its_thresholds(study) -> None:
     from fdi_sim.flightlog import read_log
     from fdi_sim.scenario import load
-    from fdi_sim.sim import run
-    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.training import fly
+    from fdi_sim.bank.thresholds_file import read_thresholds
 
     out, thr, _, tmp = study
     t = read_thresholds(thr)
-    res = run(load(_run_scenario(out, tmp, str(thr))), tmp / "logs", progress=False)
+    res = fly(load(_run_scenario(out, tmp, str(thr))), tmp / "logs", progress=False)
     assert res.status == "completed"
     log = read_log(res.log_path)
     members = json.loads(log.metadata["fdi"]["members"])
@@ -135,12 +135,12 @@ def test_a_bank_with_the_file_flies_exactly_its_thresholds(study) -> None:
 
 def test_a_bank_the_file_does_not_match_is_refused(study) -> None:
     from fdi_sim.scenario import load
-    from fdi_sim.sim import run
+    from fdi_sim.training import fly
 
     out, thr, _, tmp = study
     sc = load(_run_scenario(out, tmp, str(thr), h_ft=9000.0))  # designed at the 10000 ft node
     with pytest.raises(ScenarioError, match=r"fdi\.thresholds.*does not match this bank: its design node") as e:
-        run(sc, tmp / "logs", progress=False)
+        fly(sc, tmp / "logs", progress=False)
     assert str(thr) in str(e.value) and 'thresholds = "trained"' in str(e.value)
     # the CLI: exit 2, one paragraph, no traceback
     p = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "run", str(_run_scenario(out, tmp, str(thr), h_ft=9000.0)),
@@ -170,24 +170,24 @@ def test_a_file_made_on_another_cpu_matches_by_its_trained_thresholds(study, tmp
     matched; one whose trained thresholds are 10 % off is refused, naming the member."""
     from fdi_sim.flightlog import read_log
     from fdi_sim.scenario import load
-    from fdi_sim.sim import run
-    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.training import fly
+    from fdi_sim.bank.thresholds_file import read_thresholds
 
     out, thr, _, tmp = study
     t = read_thresholds(thr)
     other = _with(thr, tmp_path / "other_cpu.toml", design_hash="0" * 24, trained=1.03)
-    res = run(load(_run_scenario(out, tmp, str(other))), tmp / "logs", progress=False)
+    res = fly(load(_run_scenario(out, tmp, str(other))), tmp / "logs", progress=False)
     log = read_log(res.log_path)
     assert [m["threshold"] for m in json.loads(log.metadata["fdi"]["members"])] == [m.threshold for m in t.members]
     cal = json.loads(log.metadata["fdi"]["calibration"])
     assert cal["source"] == "study" and cal["matched_by"].startswith("trained thresholds within 2.9")
     far = _with(thr, tmp_path / "far.toml", design_hash="0" * 24, trained=1.1)
     with pytest.raises(ScenarioError, match=r"does not match this bank: its \S+ trained threshold .*9\.1% apart"):
-        run(load(_run_scenario(out, tmp, str(far))), tmp / "logs", progress=False)
+        fly(load(_run_scenario(out, tmp, str(far))), tmp / "logs", progress=False)
 
 
 def test_a_damaged_file_is_refused_naming_the_key(study, tmp_path: Path) -> None:
-    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.bank.thresholds_file import read_thresholds
 
     _, thr, _, _ = study
     bad = tmp_path / "bad.toml"
@@ -202,11 +202,11 @@ def test_shipped_on_an_aircraft_without_a_file_is_refused(tmp_path: Path, monkey
     from fdi_sim.scenario import load
     from fdi_sim.scenario.loader import from_dict
     from fdi_sim.scenario.shipped import shipped_dir
-    from fdi_sim.sim import bank_design
-    from fdi_sim.sim.bank_design import thresholds_source
+    from fdi_sim.training import thresholds
+    from fdi_sim.training.thresholds import thresholds_source
 
     # both aircraft ship a file: an installation without the F-16's
-    monkeypatch.setattr(bank_design, "shipped_thresholds_path", lambda aircraft: tmp_path / "fdi_thresholds.toml")
+    monkeypatch.setattr(thresholds, "shipped_thresholds_path", lambda aircraft: tmp_path / "fdi_thresholds.toml")
     d = json.loads(load(shipped_dir() / "f16_cruise_doublets.toml").to_json())
     d["fdi"] = {**d.get("fdi", {}), "bank": "default", "thresholds": "shipped"}
     with pytest.raises(ScenarioError, match=r"fdi\.thresholds: no shipped thresholds file for the f16"):
@@ -224,9 +224,9 @@ def test_the_shipped_file_matches_the_bank_its_study_flies(tmp_path: Path, aircr
     and method (~1 min with a cold cache: the gust filter's training)."""
     from fdi_sim.flightlog import read_log
     from fdi_sim.scenario.loader import from_dict
-    from fdi_sim.sim import run
-    from fdi_sim.sim.bank_design import shipped_thresholds_path
-    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.training import fly
+    from fdi_sim.bank.thresholds_file import shipped_thresholds_path
+    from fdi_sim.bank.thresholds_file import read_thresholds
     from fdi_sim.study.spec import load_study
 
     t = read_thresholds(shipped_thresholds_path(aircraft))
@@ -236,7 +236,7 @@ def test_the_shipped_file_matches_the_bank_its_study_flies(tmp_path: Path, aircr
     d = json.loads(sc.to_json())
     d["fdi"]["thresholds"] = "shipped"
     d["duration_s"] = 50.0  # past the last doublet: the training flights fly the same maneuvers
-    res = run(from_dict(d, source=f"{study_name} run 3"), tmp_path, progress=False)
+    res = fly(from_dict(d, source=f"{study_name} run 3"), tmp_path, progress=False)
     cal = json.loads(read_log(res.log_path).metadata["fdi"]["calibration"])
     assert [m["threshold"] for m in cal["members"]] == [m.threshold for m in t.members]
     assert cal["study_identity"] == t.study_identity
@@ -246,7 +246,7 @@ def test_the_shipped_file_matches_the_bank_its_study_flies(tmp_path: Path, aircr
 def test_a_relative_thresholds_path_is_read_beside_the_scenario_file(tmp_path: Path) -> None:
     from fdi_sim.scenario import load
     from fdi_sim.scenario.shipped import shipped_dir
-    from fdi_sim.sim.bank_design import thresholds_source
+    from fdi_sim.training.thresholds import thresholds_source
 
     text = (shipped_dir() / "dhc6_elevator_loss.toml").read_text()
     (tmp_path / "sub").mkdir()
@@ -263,12 +263,13 @@ def test_a_default_shipped_source_that_does_not_cover_the_bank_says_so_in_the_lo
     study's 24 x 300 s) flies its trained thresholds, and its log's calibration record says why."""
     from fdi_sim.flightlog import read_log
     from fdi_sim.scenario import load
-    from fdi_sim.sim import bank_design, run
-    from fdi_sim.sim.calibrate import read_thresholds
+    from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS
+    from fdi_sim.training import fly
+    from fdi_sim.bank.thresholds_file import read_thresholds
 
     out, thr, _, tmp = study
-    monkeypatch.setitem(bank_design.DEFAULT_THRESHOLDS, "DHC6", "shipped")
-    res = run(load(_run_scenario(out, tmp, "default")), tmp / "logs", progress=False)
+    monkeypatch.setitem(DEFAULT_THRESHOLDS, "DHC6", "shipped")
+    res = fly(load(_run_scenario(out, tmp, "default")), tmp / "logs", progress=False)
     cal = json.loads(read_log(res.log_path).metadata["fdi"]["calibration"])
     assert cal["source"] == "trained" and "does not cover this bank's design" in cal["note"]
     assert [m["threshold"] for m in cal["members"]] == [m.trained_threshold for m in read_thresholds(thr).members]

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fdi_sim.errors import StudyError
-from fdi_sim.sim.bank import _decide
+from fdi_sim.bank.runtime import _decide
 from fdi_sim.study import rescore as R
 from fdi_sim.study.stats import BANK, summarize
 

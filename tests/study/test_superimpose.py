@@ -15,7 +15,7 @@ import pytest
 from fdi_sim.errors import LogError, ScenarioError
 from fdi_sim.flightlog import TOPIC_FAULTS, read_log
 from fdi_sim.scenario import loads
-from fdi_sim.sim import run
+from fdi_sim.training import fly
 from fdi_sim.study.superimpose import loop_fault_rng, superimpose, superimpose_study
 
 SEED = 21
@@ -67,8 +67,8 @@ def flights(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("superimpose")
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("FDI_SIM_CACHE", str(tmp / "cache"))  # the calibration (4 x 60 s) once, here
-        free = run(loads(FLIGHT.format(name="t_sup_free", faults="")), tmp, progress=False)
-        closed = run(loads(FLIGHT.format(name="t_sup_closed", faults=GYRO_BIAS + ALTIMETER_NOISE)), tmp,
+        free = fly(loads(FLIGHT.format(name="t_sup_free", faults="")), tmp, progress=False)
+        closed = fly(loads(FLIGHT.format(name="t_sup_closed", faults=GYRO_BIAS + ALTIMETER_NOISE)), tmp,
                      progress=False)
         assert free.status == closed.status == "completed"
         yield free, closed, tmp

@@ -3,7 +3,7 @@
 A scenario that climbs or accelerates leaves the trim point its detector was designed at. This
 module finds the schedule points its flight crosses (:func:`schedule_points`), trims and
 linearizes them, designs ``kalman-gust-v1`` at each with the options
-:func:`fdi_sim.sim.calibrate.calibrated_gust_kalman` uses, calibrates each on fault-free flights
+:func:`fdi_sim.training.gust.calibrated_gust_kalman` uses, calibrates each on fault-free flights
 at that point, and returns the :class:`~fdi_sim.detectors.scheduled.GustKalmanSchedule` that the
 streaming kernel (:mod:`fdi_sim.detectors.gust_kalman_stream`) runs (:func:`design_schedule`).
 
@@ -69,8 +69,8 @@ among DHC-6 points all the time. The mismatch above is a function of the steady-
 Caches
 ------
 * Calibrations: ``$FDI_SIM_CACHE/fdi-sim/calibrations/<key>.json`` (the folder of
-  :func:`fdi_sim.sim.calibrate.cache_dir`), one entry per point, written to a temporary name and
-  committed by rename. The key (:func:`fdi_sim.sim.calibrate.calibration_key`) hashes the
+  :func:`fdi_sim.training.cache.cache_dir`), one entry per point, written to a temporary name and
+  committed by rename. The key (:func:`fdi_sim.training.cache.calibration_key`) hashes the
   calibration scenario at that point (:func:`point_scenario`, fault-free: aircraft, initial
   point, atmosphere, autopilot, sensors, limits, rate, pulse-train maneuvers; name and
   description left out), the design (its model's A, B, C, D, u0, y0, the last gain, the
@@ -102,9 +102,9 @@ from fdi_sim.operating_point import OperatingPoint
 from fdi_sim.pilot.maneuvers import PulseTrain, RefRamp
 from fdi_sim.scenario import Scenario
 from fdi_sim.scenario.loader import from_dict
-from fdi_sim.sim.calibrate import (
-    DEFAULT_TARGET, DEFAULT_TRAINING_FLIGHTS, DEFAULT_TRAINING_S, CachedCalibration, gust_kalman_calibration,
-)
+from fdi_sim.training.cache import CachedCalibration
+from fdi_sim.training.flights import DEFAULT_TARGET, DEFAULT_TRAINING_FLIGHTS, DEFAULT_TRAINING_S
+from fdi_sim.training.gust import gust_kalman_calibration
 
 #: grid spacing per aircraft, (h [ft], vc [kt]): how far a design stays acceptable (module docstring)
 DEFAULT_SPACING: dict[str, tuple[float, float]] = {"f16": (6000.0, 20.0), "DHC6": (2000.0, 4.0)}
@@ -393,7 +393,7 @@ def design_schedule(sc: Scenario, points: Sequence[Sequence[float]], *, rate_hz:
     t0 = time.perf_counter()
     models, fails = _linearize_points(sc, pts)
     t_lin = time.perf_counter() - t0
-    notes: list[str] = [f"designed by fdi_sim.sim.designs.design_schedule for {sc.source} ({sc.aircraft}, "
+    notes: list[str] = [f"designed by fdi_sim.training.schedule.design_schedule for {sc.source} ({sc.aircraft}, "
                         f"{sc.model.atmosphere.turbulence} turbulence), {len(pts)} points linearized in {t_lin:.1f} s",
                         f"calibration 'points': {n_flights} x {duration_s:g} s fault-free flights at each point "
                         f"(seeds 1e6 + i, pulse-train maneuvers only), target {target:g} per sample at {rate_hz:g} Hz"]

@@ -34,7 +34,7 @@ window's lag).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 import numba
@@ -43,14 +43,14 @@ from numpy.typing import NDArray
 
 from fdi_sim.decision.failure_log import FailureLogger
 from fdi_sim.decision.persistence import k_of_n_step
+from fdi_sim.bank.topics import RECONFIG_JSON_SCHEMA, STAT_FIELDS, TOPIC_FDI_RECONFIG, msg_name
+from fdi_sim.decision.outcome import LATE_GRACE_S, fault_outcome
 from fdi_sim.errors import DesignError
 
 #: the commands an actuator reconfiguration can rescale, in the loop's write order
 ACTUATOR_INPUTS = ("elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm", "throttle_cmd_norm")
 #: the largest rescale (an effectiveness estimate below 1/3 is not made up: the stops would cut it)
 MAX_COMMAND_SCALE = 3.0
-#: topics of the bank (beside the per-detector ``/fdi/<id>/...``)
-TOPIC_FDI_RECONFIG = "/fdi/reconfiguration"
 
 
 @numba.njit(cache=True, nogil=True)
@@ -442,10 +442,10 @@ class FdiBank:
             ch.stat = writer.add_vector_channel(fdi_topic(m.id, "statistic"), "fdi_sim/msg/DetectorStatistic",
                                                 STAT_FIELDS)
             if log_residuals:
-                ch.resid = writer.add_vector_channel(fdi_topic(m.id, "residual"), _msg_name(m.id, "Residual"),
+                ch.resid = writer.add_vector_channel(fdi_topic(m.id, "residual"), msg_name(m.id, "Residual"),
                                                      ("t_s",) + tuple(m.residual_names))
                 if m.estimate_names:
-                    ch.est = writer.add_vector_channel(fdi_topic(m.id, "estimate"), _msg_name(m.id, "Estimate"),
+                    ch.est = writer.add_vector_channel(fdi_topic(m.id, "estimate"), msg_name(m.id, "Estimate"),
                                                        ("t_s",) + tuple(m.estimate_names))
             self._chans.append(ch)
         self._ch_alarms = writer.add_event_channel(TOPIC_FDI_ALARMS, "fdi_sim/msg/Alarm", ALARM_JSON_SCHEMA)
@@ -708,35 +708,6 @@ class FdiBank:
                     ch.est.write_rows(t[a:b], m.yhat[a:b])
 
 
-def _msg_name(detector_id: str, what: str) -> str:
-    """A message name per detector and layout: ``fdi_sim/msg/KalmanGustV1Residual``."""
-    import re
-
-    return "fdi_sim/msg/" + "".join(p[:1].upper() + p[1:] for p in re.split(r"[^A-Za-z0-9]+", detector_id) if p) + what
-
-
-#: fields of ``/fdi/<id>/statistic`` (numbers only, so that Foxglove and PlotJuggler plot them)
-STAT_FIELDS = ("t_s", "statistic", "threshold", "exceedance", "alarm", "valid", "isolation", "point")
-
-RECONFIG_JSON_SCHEMA: dict[str, Any] = {
-    "type": "object", "title": "fdi-sim reconfiguration action", "required": ["action", "sensor"],
-    "properties": {
-        "action": {"type": "string", "description": "what was done"},
-        "sensor": {"type": "string", "description": "the sensor or actuator acted on"},
-        "detector": {"type": "string", "description": "the detector whose isolation triggered it"},
-        "t_s": {"type": "number", "description": "time of the isolated sample [s]"},
-        "confirmed_by": {"type": "string", "description": "the members that confirmed the isolation"},
-        "effectiveness": {"type": "number", "description": "estimated actuator effectiveness [-]"},
-        "effectiveness_std": {"type": "number", "description": "its standard deviation [-]"},
-        "scale": {"type": "number", "description": "the factor the command is multiplied by [-]"},
-    },
-}
-
-
-#: an alarm up to this long after a fault window ends still belongs to that fault [s]
-LATE_GRACE_S = 2.0
-
-
 @dataclass(frozen=True)
 class FaultDetection:
     """One injected fault as one bank member saw it (the run summary)."""
@@ -754,7 +725,7 @@ class FaultDetection:
 def fdi_outcomes(bank: FdiBank, faults: Sequence[Mapping[str, Any]], t_end_s: float
                  ) -> tuple[tuple[FaultDetection, ...], tuple[BankAlarm, ...]]:
     """Per injected fault and member: the first alarm from the fault's onset, the delay and the
-    isolation (:func:`fdi_sim.sim.detect.fault_outcome`, the rule ``fdi-sim detect`` reports
+    isolation (:func:`fdi_sim.decision.outcome.fault_outcome`, the rule ``fdi-sim detect`` reports
     with); and the false alarms: alarm episodes that begin outside every fault window and its
     :data:`LATE_GRACE_S`.
 
@@ -767,8 +738,6 @@ def fdi_outcomes(bank: FdiBank, faults: Sequence[Mapping[str, Any]], t_end_s: fl
     t_end_s : float
         End of the flight [s] (an open window ends there).
     """
-    from fdi_sim.sim.detect import fault_outcome
-
     t, dec = bank.decisions()
     out = []
     windows = [(float(a), min(float(b), t_end_s)) for f in faults for a, b in f.get("windows_s", [])]

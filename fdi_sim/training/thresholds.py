@@ -1,0 +1,287 @@
+"""Members' thresholds: from the fault-free training flights, or from a calibration study's file.
+
+Training flights: the bank's design false-alarm rate ``far_per_h`` is split evenly over its
+members (a union bound), and each member's threshold is the level whose alarm episodes come
+``far_per_h / members`` times per flight hour on the training flights: the k-of-n decision applied
+exactly (:func:`fdi_sim.decision.tail.persistence_series`), the episodes' peaks fitted by a
+generalized Pareto (or exponential) tail and extrapolated
+(:func:`fdi_sim.decision.tail.episode_threshold`), taken at its 95 % bootstrap bound over the
+training flights. Every member the same way, built in or plugin. A study's file
+(:mod:`fdi_sim.bank.thresholds_file`) replaces them where it covers the bank's design.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from fdi_sim import __version__
+from fdi_sim.errors import DesignError, ScenarioError
+from fdi_sim.scenario import Scenario
+from fdi_sim.bank.members import design_hash
+from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
+from fdi_sim.training.flights import design_scenario
+from fdi_sim.units import S_PER_H
+
+
+#: thresholds meet the per-sample target with this confidence (flight-level bootstrap)
+THRESHOLD_CONFIDENCE = 0.95
+
+
+def thresholds_source(sc: Scenario) -> tuple[Path | None, bool]:
+    """Where ``[fdi] thresholds`` takes the thresholds from: a thresholds file (None: the training
+    flights), and whether the scenario named it (a mismatch is then an error, not trained thresholds).
+
+    Raises
+    ------
+    ScenarioError
+        ``"shipped"`` for an aircraft without a shipped file.
+    """
+    mode = sc.model.fdi.thresholds
+    explicit = mode != "default"
+    if mode == "default":
+        mode = DEFAULT_THRESHOLDS.get(sc.aircraft, "trained")
+    if mode == "trained":
+        return None, explicit
+    if mode == "shipped":
+        path = shipped_thresholds_path(sc.aircraft)
+        if not path.is_file():
+            if not explicit:
+                return None, False
+            raise ScenarioError(sc.source, "fdi.thresholds", f"no shipped thresholds file for the {sc.aircraft} "
+                                f"({path} does not exist)", 'use thresholds = "trained", or give the path of a file '
+                                "written by `fdi-sim study STUDY --calibrate OUT.toml`")
+        return path, explicit
+    # a relative path: beside the scenario file (its source, before any " (bank design at ...)"
+    # suffix), else from the working directory; a missing file is reported by read_thresholds
+    path = Path(mode)
+    if not path.is_absolute() and not path.is_file():
+        beside = Path(sc.source.split(" (")[0]).parent / path
+        if beside.is_file():
+            path = beside
+    return path, True
+
+
+def design_node(sc: Scenario) -> dict[str, Any]:
+    """The bank's design conditions (of :func:`design_scenario`): node, turbulence, wind, noise scale."""
+    from fdi_sim.training.schedule import initial_vc_kts
+
+    d = design_scenario(sc)
+    return {"h_ft": float(d.model.initial.h_ft), "vc_kts": round(float(initial_vc_kts(d)), 6),
+            "turbulence": d.model.atmosphere.turbulence, "wind_speed_kts": float(d.model.atmosphere.wind_speed_kts),
+            "noise_scale": float(d.model.sensors.noise_scale)}
+
+
+def note_no_match(sc: Scenario, path: Path) -> str:
+    n = design_node(sc)
+    return (f"thresholds = \"default\": {path} does not cover this bank's design (h {n['h_ft']:g} ft, vc "
+            f"{n['vc_kts']:g} kt, {n['turbulence']} turbulence): trained thresholds")
+
+
+#: a thresholds file whose design hash differs from the bank's still covers it when every member's
+#: trained threshold is within this relative distance of the file's: measured between two CPUs
+#: (the file made on an AMD EPYC without FMA, the bank on an Intel Xeon with AVX-512 and FMA, the
+#: same code): design hashes differ (libm and BLAS round differently, the turbulent training
+#: flights diverge from their last bits), the five DHC-6 trained thresholds by 0.2-0.9 %
+TRAINED_MATCH_REL = 0.05
+
+
+def apply_study_thresholds(sc: Scenario, bank: Any, path: Path, *, explicit: bool = True,
+                           retrain: Callable[[], Any] | None = None) -> str | None:
+    """Set the members' thresholds from a thresholds file where it matches the bank (aircraft,
+    design node, member ids, rate and k-of-n rule; then the design hash, or, on a machine that
+    rounds differently, the members' trained thresholds within :data:`TRAINED_MATCH_REL` of the
+    file's, from ``retrain()``, which sets them on the bank); record the method per member.
+
+    The calibrated thresholds describe the members' fault-free statistics, so the trained
+    thresholds (the same statistics' tails on the bank's own training flights) are the test of
+    whether the file still describes this bank: a bit-exact design hash ties a file to the CPU
+    that made it.
+
+    Returns None (nothing set) for a mismatch when ``explicit`` is False (``thresholds = "default"``).
+
+    Raises
+    ------
+    ScenarioError
+        A mismatch when the scenario named the file (``explicit``): names the file, the key, what
+        differs and the fix.
+    """
+    from fdi_sim.bank.thresholds_file import read_thresholds
+
+    t = read_thresholds(path)
+    f = sc.model.fdi
+    node = design_node(sc)
+    want = {"aircraft": (t.aircraft, sc.aircraft),
+            "design node": ((t.design_h_ft, t.design_vc_kts, t.design_turbulence, t.design_wind_speed_kts,
+                             t.design_noise_scale),
+                            (node["h_ft"], node["vc_kts"], node["turbulence"], node["wind_speed_kts"],
+                             node["noise_scale"])),
+            "members": ([m.id for m in t.members], [m.id for m in bank.members]),
+            "decision": ((t.rate_hz, t.persistence_k, t.persistence_n),
+                         (float(f.rate_hz), f.persistence_k, f.persistence_n))}
+    bad = [(k, a, b) for k, (a, b) in want.items() if (round(a, 6) if isinstance(a, float) else a) !=
+           (round(b, 6) if isinstance(b, float) else b)]
+    matched = "design hash"
+    if not bad:
+        h = design_hash(bank)
+        if h != t.design_hash:
+            bad = [("design hash", t.design_hash, h)]
+            if retrain is not None:
+                retrain()
+                rel = [abs(mem.threshold - m.trained_threshold) / abs(m.trained_threshold)
+                       for mem, m in zip(bank.members, t.members)]
+                worst = int(np.argmax(rel))
+                if rel[worst] <= TRAINED_MATCH_REL:
+                    bad = []
+                    matched = (f"trained thresholds within {rel[worst]:.2%} of the file's (design hash {h}, the "
+                               f"file's {t.design_hash}: another CPU's rounding, or a design change too small to move them)")
+                else:
+                    bad = [(f"{t.members[worst].id} trained threshold", t.members[worst].trained_threshold,
+                            f"{bank.members[worst].threshold} ({rel[worst]:.1%} apart, more than "
+                            f"{TRAINED_MATCH_REL:.0%}; design hash {h}, the file's {t.design_hash})")]
+    if bad:
+        if not explicit:
+            return None
+        k, a, b = bad[0]
+        raise ScenarioError(sc.source, "fdi.thresholds", f"the thresholds file {path} does not match this bank: its "
+                            f"{k} is {a}, the bank's is {b} (the file holds thresholds of study {t.study}'s bank, "
+                            f"designed at h {t.design_h_ft:g} ft, vc {t.design_vc_kts:g} kt, {t.design_turbulence} "
+                            "turbulence)", 'use thresholds = "trained" (the bank\'s own training flights), set [fdi.design] '
+                            f"to the file's design (e.g. design = {{ point = \"grid\", turbulence = \"{t.design_turbulence}\" }} "
+                            "at a point of that node), or calibrate a study at this bank's design with "
+                            "`fdi-sim study STUDY --calibrate OUT.toml`")
+    rec = {"source": "study", "file": str(path), "study": t.study, "study_identity": t.study_identity,
+           "runs": t.runs, "flight_h": t.flight_h, "design_hash": t.design_hash, "far_per_h": t.far_per_h,
+           "matched_by": matched, "members": []}
+    for mem, m in zip(bank.members, t.members):
+        mem.set_threshold(float(m.threshold))
+        rec["members"].append({"id": m.id, "threshold": m.threshold, "method": t.member_method(m.id),
+                               "trained_threshold": m.trained_threshold})
+    bank.calibration = rec
+    bank.keep_trace(False)
+    bank.reset()
+    return rec["members"][0]["method"] if rec["members"] else ""
+
+
+# --- thresholds from the training flights ---------------------------------------------------------
+def _cache_path(key: str) -> Path:
+    from fdi_sim.training.cache import cache_dir
+
+    return cache_dir() / f"bank-{key}.json"
+
+
+def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
+    from fdi_sim.detectors.stream import stream_design_key
+    from fdi_sim.training.flights import fault_free
+
+    f = sc.model.fdi
+    ff = json.loads(fault_free(sc, 0, f.calibration_duration_s).to_json())
+    ff.pop("name", None)
+    ff.pop("description", None)
+    ff.pop("fdi", None)
+    h = hashlib.sha256()
+    for mem in bank.members:
+        h.update(mem.id.encode())
+        h.update(stream_design_key(mem.stream))
+    blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "confidence": THRESHOLD_CONFIDENCE, "n": f.calibration_flights, "T": f.calibration_duration_s,
+                       "decision": [f.persistence_k, f.persistence_n], "method": "episodes-v5", "version": __version__, "members": h.hexdigest()},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:24]
+
+
+def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Sequence[Any] | None = None,
+                         progress: bool = True, use_cache: bool = True) -> dict[str, Any]:
+    """Set each member's threshold from its statistic on the fault-free training flights (the same
+    flights the filters were calibrated on): the level of ``far_per_h / members`` alarm episodes per
+    flight hour under the bank's k-of-n rule (module docstring); for the angle-magnitude rule, and
+    where the flights hold too few episodes to fit, the ``1 - p`` per-sample quantile.
+
+    Returns the record stored in the cache (thresholds, method, training samples per member).
+    """
+    from fdi_sim.decision.tail import confident_episode_threshold, confident_tail_threshold, persistence_series
+    from fdi_sim.training.cache import cache_lock, read_entry, write_entry
+    from fdi_sim.training.flights import fly_training, training_seeds
+
+    f = sc.model.fdi
+    key = _thresholds_key(sc, bank, p)
+    path = _cache_path(key)
+    with cache_lock(path, use_cache):  # another process computing this entry: wait, then read it
+        rec = read_entry(path, use_cache)
+        try:
+            if rec is not None and [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
+                rec = None
+        except (KeyError, TypeError):
+            rec = None  # a damaged entry is recomputed
+        if rec is None:
+            logs = training_logs
+            if logs is None:
+                logs = fly_training(sc, training_seeds(f.calibration_flights), f.calibration_duration_s, progress=progress)
+            logs = list(logs)
+            d = bank.decision
+            episodes = d.rule == "persistence"  # the angle rule's exceedance also needs a direction
+            stats: list[list[np.ndarray]] = [[] for _ in bank.members]
+            series: list[list[np.ndarray]] = [[] for _ in bank.members]
+            hours: list[list[float]] = [[] for _ in bank.members]
+            for lg in logs:
+                _replay_log(bank, lg, raw_thresholds=True)
+                for i, mem in enumerate(bank.members):
+                    st, ok = mem.trace_series()
+                    stats[i].append(st[ok])
+                    if episodes:
+                        series[i].append(persistence_series(st, ok, d.k, d.n))
+                        hours[i].append(float(ok.sum()) / (float(f.rate_hz) * S_PER_H))
+            rate = float(f.far_per_h) / max(1, len(bank.members))
+            rec = {"p_per_sample": p, "episodes_per_h": rate if episodes else None,
+                   "confidence": THRESHOLD_CONFIDENCE, "members": []}
+            rng = np.random.default_rng(0)  # the bootstrap's resampling: fixed, so a calibration is reproducible
+            for i, (mem, s) in enumerate(zip(bank.members, stats)):
+                s = [x[np.isfinite(x)] for x in s]
+                x = np.concatenate(s)
+                if x.size < 2:
+                    raise DesignError(f"{sc.source}: {mem.id} gave {x.size} valid statistic samples on its "
+                                      f"{len(logs)} fault-free training flights (armed from {f.arm_s:g} s): no "
+                                      "threshold can be set; its design does not settle on this aircraft")
+                if episodes:
+                    try:
+                        thr, method = confident_episode_threshold(series[i], rate, hours[i], rng,
+                                                                  level=THRESHOLD_CONFIDENCE)
+                    except DesignError as e:  # short training flights: too few episodes to fit
+                        thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
+                        method = f"per-sample ({e}): {method}"
+                else:
+                    thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
+                rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
+                                       "max_training": float(x.max()) if x.size else None})
+            write_entry(path, rec, use_cache)
+    for mem, r in zip(bank.members, rec["members"]):
+        mem.set_threshold(float(r["threshold"]))
+    bank.calibration = rec
+    bank.keep_trace(False)  # the replays kept every block; a flight must not
+    bank.reset()
+    return rec
+
+
+def _replay_log(bank: Any, log: Any, *, raw_thresholds: bool = False) -> None:
+    """Run the bank over a log's rows (trace kept per member)."""
+    from fdi_sim.flightlog import TOPIC_COMMANDS, TOPIC_SENSORS, TOPIC_SENSORS_VALID
+
+    cmd = log.topics[TOPIC_COMMANDS]
+    meas = log.topics[TOPIC_SENSORS]
+    K = min(len(cmd.t_s), len(meas.t_s))
+    u = np.column_stack([cmd[nm][:K] for nm in bank.cmd_names])
+    y = np.column_stack([meas[nm][:K] for nm in bank.meas_names])
+    valid = None
+    if TOPIC_SENSORS_VALID in log.topics:
+        vt = log.topics[TOPIC_SENSORS_VALID]
+        valid = np.column_stack([vt[nm][:K] > 0.5 if nm in vt.fields else np.ones(K, bool) for nm in bank.meas_names])
+    bank.reset()
+    bank.keep_trace(True)
+    if raw_thresholds:
+        for mem in bank.members:
+            mem.set_threshold(np.inf)
+    dt = float(np.median(np.diff(np.asarray(meas.t_s[:K]))))
+    bank.replay(u, y, valid, dt, t_rows_s=np.asarray(meas.t_s[:K], dtype=float))
+
