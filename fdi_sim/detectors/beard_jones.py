@@ -15,6 +15,12 @@ Design, for each hypothesized direction ``f_i`` (seed ``002_d6038a6910cf5866.txt
    order k by eq. 2.24), then ``L_p`` places the remaining poles on ``(A_i, C_i)`` and
    ``L = L_i + L_p (I - Cf (Cf)^+)`` (eq. 2.50).
 
+A fault that also reaches the outputs directly (``y = C x + d n``: every actuator of the paired
+sampled models, and the accelerometers see a surface at once) has the output direction ``d`` and
+detection order 0, ``L d = f`` (:func:`feedthrough_space`): the patent's rule that the output
+direction is the first non-zero Markov parameter (``C A^mu f``, eq. 2.15-2.16, 2.27) one step
+earlier, and eq. 2.24 with ``k = 0``.
+
 Several output-separable faults share one filter when their detection spaces are independent
 and no unassignable pole is unstable; otherwise
 :func:`~fdi_sim.detectors.beard_jones_filter.plan_bank` splits them into a bank.
@@ -25,6 +31,7 @@ runtime filter, the bank and the model-level design are in :mod:`fdi_sim.detecto
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -226,9 +233,12 @@ class OutputSeparability:
     mu : tuple of int
         Per fault, the smallest ``j`` with ``C A^j f_i != 0`` (eq. 2.15-2.16); -1 if none below n.
     output_directions : NDArray
-        (m, r) unit columns ``C A^mu_i f_i``.
+        (m, r) unit columns: the feedthrough ``d_i`` of a fault that has one, else ``C A^mu_i f_i``.
     dependent : tuple of tuple of int
         Fault indices whose output directions are linearly dependent on earlier ones.
+    feedthrough : tuple of bool
+        Per fault, True if it reaches the outputs directly (``y = C x + d_i n_i``, ``d_i != 0``): its
+        output direction is ``d_i`` (relative degree 0, :func:`feedthrough_space`). Empty: none has.
     """
 
     separable: bool
@@ -236,6 +246,7 @@ class OutputSeparability:
     mu: tuple[int, ...]
     output_directions: Array
     dependent: tuple[tuple[int, ...], ...]
+    feedthrough: tuple[bool, ...] = ()
 
 
 def _first_visible_power(A: Array, C: Array, f: Array, rtol: float) -> tuple[int, Array]:
@@ -249,7 +260,31 @@ def _first_visible_power(A: Array, C: Array, f: Array, rtol: float) -> tuple[int
     return -1, f
 
 
-def output_separability(A: NDArray, C: NDArray, F: NDArray, rtol: float = 1e-9) -> OutputSeparability:
+def has_feedthrough(C: NDArray, f: NDArray, d: NDArray | None, rtol: float = 1e-9) -> bool:
+    """True if the fault's feedthrough ``d`` [output units per unit fault] is not zero.
+
+    The test of ``C A^j f != 0`` in :func:`output_separability` (eq. 2.15-2.16), one Markov
+    parameter earlier: ``|d| > rtol |C| |f|``.
+    """
+    if d is None:
+        return False
+    d = np.asarray(d, float).reshape(-1)
+    scale = max(float(np.linalg.norm(C, 2)) * float(np.linalg.norm(f)), 1e-300)
+    return bool(np.linalg.norm(d) > rtol * scale)
+
+
+def _feedthrough_columns(C: Array, F: Array, G: NDArray | None) -> Array | None:
+    """``G`` as an (m, r) array (None if not given), checked against ``C`` and ``F``."""
+    if G is None:
+        return None
+    G = np.asarray(G, float).reshape(C.shape[0], -1)
+    if G.shape[1] != F.shape[1]:
+        raise DesignError(f"feedthrough has {G.shape[1]} columns for {F.shape[1]} fault directions")
+    return G
+
+
+def output_separability(A: NDArray, C: NDArray, F: NDArray, rtol: float = 1e-9,
+                        feedthrough: NDArray | None = None) -> OutputSeparability:
     """Check output separability of the columns of ``F`` (Lemma 2.1.2).
 
     Parameters
@@ -260,14 +295,22 @@ def output_separability(A: NDArray, C: NDArray, F: NDArray, rtol: float = 1e-9) 
         Fault directions as columns.
     rtol : float
         Relative rank tolerance.
+    feedthrough : (m, r) array, optional
+        Direct effect ``d_i`` of each fault on the outputs (``y = C x + d_i n_i``) [output units per
+        unit fault]. A fault with ``d_i != 0`` (:func:`has_feedthrough`) has the output direction
+        ``d_i``: the first non-zero Markov parameter of the fault, as ``C A^mu f`` is in eq. 2.27.
     """
     A, C = np.asarray(A, float), np.asarray(C, float)
     F = np.asarray(F, float).reshape(A.shape[0], -1)
+    G = _feedthrough_columns(C, F, feedthrough)
     shifts = [_first_visible_power(A, C, F[:, i], rtol) for i in range(F.shape[1])]
     mus = tuple(mu for mu, _ in shifts)
+    ft = tuple(G is not None and has_feedthrough(C, F[:, i], G[:, i], rtol) for i in range(F.shape[1]))
     D = np.zeros((C.shape[0], F.shape[1]))
     for i, (mu, fmu) in enumerate(shifts):
-        if mu >= 0:
+        if ft[i]:
+            D[:, i] = G[:, i] / np.linalg.norm(G[:, i])  # type: ignore[index]
+        elif mu >= 0:
             cf = C @ fmu
             D[:, i] = cf / np.linalg.norm(cf)
     dep: list[tuple[int, ...]] = []
@@ -276,7 +319,8 @@ def output_separability(A: NDArray, C: NDArray, F: NDArray, rtol: float = 1e-9) 
             partners = tuple(j for j in range(i) if angle_rad(D[:, i], D[:, j]) < 1e-4) or tuple(range(i))
             dep.append((*partners, i))
     r = _rank(D, 1e-7)
-    return OutputSeparability(r == F.shape[1] and min(mus, default=0) >= 0, r, mus, D, tuple(dep))
+    visible = all(f or mu >= 0 for f, mu in zip(ft, mus))
+    return OutputSeparability(r == F.shape[1] and visible, r, mus, D, tuple(dep), ft if any(ft) else ())
 
 
 # ----------------------------------------------------------------------------- detection space
@@ -297,7 +341,8 @@ class DetectionSpace:
     order : int
         Detection order k (Definition 2.1.5).
     mu : int
-        Smallest ``j`` with ``C A^j f != 0`` (eq. 2.15-2.16).
+        Smallest ``j`` with ``C A^j f != 0`` (eq. 2.15-2.16); for a fault with a feedthrough only
+        informative (-1 if none below n), its output direction is the feedthrough.
     generator : NDArray
         (n,) maximal detection generator ``g``: ``C A^j g = 0`` for ``j < k-1`` (eq. 2.11),
         ``C A^(k-1) g != 0`` (eq. 2.12), ``f = sum alpha_j A^(j-1) g`` with ``alpha_(k-mu) = 1``
@@ -305,7 +350,12 @@ class DetectionSpace:
     alpha : NDArray
         (k,) the coefficients ``alpha_1..alpha_k`` of eq. 2.14.
     output_direction : NDArray
-        (m,) unit vector ``C A^mu f`` (eq. 2.27): every residual of this fault lies on it.
+        (m,) unit vector ``C A^mu f`` (eq. 2.27), or the feedthrough ``d / |d|``: every residual of
+        this fault lies on it.
+    feedthrough : NDArray or None
+        (m,) the fault's direct effect ``d`` on the outputs [output units per unit fault] when it
+        has one (:func:`feedthrough_space`): order 0, ``basis`` is (n, 0), ``generator`` is ``f``
+        itself and ``alpha`` is empty. None for a fault in the state equation only.
     """
 
     f: Array
@@ -316,6 +366,53 @@ class DetectionSpace:
     generator: Array
     alpha: Array
     output_direction: Array
+    feedthrough: Array | None = None
+
+
+def feedthrough_space(A: NDArray, C: NDArray, f: NDArray, d: NDArray, name: str = "f", rtol: float = 1e-9) -> DetectionSpace:
+    """The detection space of a fault that also reaches the outputs directly: order 0.
+
+    The patent's model has the fault in the state equation only (eq. 2.6-2.7). A sampled actuator
+    fault also moves the outputs of its own sample (``y = C x + d n``, ``d = D b`` for the input
+    column ``b`` of ``D``: the paired form of :mod:`fdi_sim.detectors.samples` has ``D = C B +
+    D_c``, accelerometers see a surface at once). Then ``e(k+1) = (A - LC) e + (f - L d) n``,
+    ``r = C e + d n``: ``r = d n`` at the onset whatever ``L``, so ``d`` is the only direction the
+    residual can keep. It keeps it exactly when ``L d = f``: the state error is then not driven
+    at all (``e = 0``) and ``r = d n(t)`` from the first sample on, for any ``n(t)``. This is the
+    detection gain of eq. 2.24 with ``k = 0`` (``L (first non-zero Markov parameter) = g``,
+    ``g = f``), the first non-zero Markov parameter being ``d`` instead of ``C A^mu f``
+    (eq. 2.15-2.16, 2.27-2.28, one step earlier). No detection pole is assigned; the poles the
+    completion cannot move are the invariant zeros of ``(A, f, C, d)``, checked stable by
+    :func:`beard_jones_gain`. (A detection space of order 1 with output direction ``d`` would need
+    a ``v`` with ``C v`` along ``d`` and ``f`` in ``span{v, A v}``; for the actuators of both aircraft
+    at the reference points ``d`` is 0.03-26 % off ``range(C)`` and ``f`` 0.1-100 % off that span.)
+
+    Parameters
+    ----------
+    A : (n, n) array
+    C : (m, n) array
+    f : (n,) array
+        Fault direction in the state equation [state units per unit fault].
+    d : (m,) array
+        Its feedthrough [output units per unit fault], not zero (:func:`has_feedthrough`).
+    name : str
+        Used in error messages.
+    rtol : float
+        Relative tolerance of the zero test.
+
+    Raises
+    ------
+    DesignError
+        ``(A, C)`` unobservable, or ``d`` zero.
+    """
+    A, C = np.asarray(A, float), np.asarray(C, float)
+    f, d = np.asarray(f, float).reshape(-1), np.asarray(d, float).reshape(-1)
+    check_observable(A, C)
+    if not has_feedthrough(C, f, d, rtol):
+        raise DesignError(f"fault {name!r}: its feedthrough is zero; use detection_space")
+    mu, _ = _first_visible_power(A, C, f, rtol)
+    n = A.shape[0]
+    return DetectionSpace(f, np.zeros((n, 0)), np.eye(n), 0, mu, f.copy(), np.zeros(0), d / np.linalg.norm(d), d.copy())
 
 
 def detection_space(A: NDArray, C: NDArray, f: NDArray, name: str = "f", rtol: float = 1e-9) -> DetectionSpace:
@@ -460,7 +557,9 @@ def _place(A: Array, B: Array, poles: NDArray, what: str) -> Array:
     if A.shape[0] == 0:
         return np.zeros((B.shape[1], 0))
     try:
-        res = place_poles(A, B, poles, method="YT", maxiter=200)
+        with warnings.catch_warnings():  # YT's "convergence not reached": the result is checked below
+            warnings.filterwarnings("ignore", "Convergence was not reached", UserWarning)
+            res = place_poles(A, B, poles, method="YT", maxiter=200)
     except ValueError as exc:
         raise DesignError(f"cannot place the {what} poles {np.round(poles, 4).tolist()}: {exc}") from exc
     got = np.linalg.eigvals(A - B @ res.gain_matrix)
@@ -474,10 +573,14 @@ def _detection_part(A: Array, C: Array, sp: DetectionSpace, poles: NDArray, name
     """``(c, v)`` with ``L c = v`` assigning ``poles`` on the detection space ``sp`` (eq. 2.23-2.24, 2.39).
 
     With ``C D = c w'`` (rank one), the closed loop on ``D`` is ``Lambda = D'A D - kappa w'``; ``c`` is the
-    unit output direction and ``v = (A D - D Lambda) w / |w|^2``.
+    unit output direction and ``v = (A D - D Lambda) w / |w|^2``. A fault with feedthrough ``d``
+    (order 0, :func:`feedthrough_space`): ``c = d / |d|``, ``v = f / |d|`` (``L d = f``), no pole.
     """
     if poles.size != sp.order:
         raise DesignError(f"fault {name!r} has detection order {sp.order}; give exactly {sp.order} detection pole(s), got {poles.size}")
+    if sp.feedthrough is not None:  # order 0: L d = f (feedthrough_space), i.e. L c = f / |d| with c = d / |d|
+        dn = float(np.linalg.norm(sp.feedthrough))
+        return sp.feedthrough / dn, sp.f / dn
     D = sp.basis
     u_, s_, vt_ = np.linalg.svd(C @ D, full_matrices=False)  # C D = c w' (rank one)
     c, w = u_[:, 0], s_[0] * vt_[0]
@@ -507,6 +610,7 @@ def beard_jones_gain(
     discrete: bool = False,
     allow_shift: bool = False,
     rtol: float = 1e-9,
+    feedthrough: NDArray | None = None,
 ) -> BeardJonesDesign:
     """Detection gain for one or several output-separable faults (App. A, Lemmas 2.1.4-2.1.7).
 
@@ -519,6 +623,11 @@ def beard_jones_gain(
     ``L = L_0 + L_p (I - CF (CF)^+)`` (eq. 2.50). The free part of ``L_p`` along the unobservable
     (detection) directions is set to zero (minimum norm); the patent's MATLAB ``place`` picked
     another member of the same family (eq. 2.51), with the same poles and detection space.
+
+    A fault with a feedthrough ``d_i`` (``y = C x + d_i n_i``) has detection order 0
+    (:func:`feedthrough_space`): ``c_i = d_i / |d_i|``, ``v_i = f_i / |d_i|`` (``L d_i = f_i``), no
+    detection pole (give an empty list); its residual is ``d_i n_i(t)`` exactly. The poles the
+    completion cannot move are then the detection poles and the invariant zeros of these faults.
 
     Parameters
     ----------
@@ -540,6 +649,9 @@ def beard_jones_gain(
         the detection order is then at least ``mu + 1``). If False such a fault raises.
     rtol : float
         Relative rank tolerance.
+    feedthrough : (m, r) array, optional
+        Direct effect ``d_i`` of each fault on the outputs [output units per unit fault]; a zero
+        column (:func:`has_feedthrough`) is a fault in the state equation only. Default: none.
 
     Raises
     ------
@@ -551,6 +663,7 @@ def beard_jones_gain(
     n, m = A.shape[0], C.shape[0]
     F = np.asarray(F, float).reshape(n, -1)
     r = F.shape[1]
+    G = _feedthrough_columns(C, F, feedthrough)
     if r == 0:
         raise DesignError("no fault direction given: F needs at least one column")
     names = tuple(names) if names is not None else tuple(f"f{i}" for i in range(r))
@@ -559,8 +672,11 @@ def beard_jones_gain(
     if len(detection_poles) != r:
         raise DesignError(f"detection_poles has {len(detection_poles)} entries for {r} faults; give one list per fault")
     check_observable(A, C)
-    sep = output_separability(A, C, F, rtol)
+    sep = output_separability(A, C, F, rtol, G)
+    ft = sep.feedthrough or (False,) * r
     for i, mu in enumerate(sep.mu):
+        if ft[i]:
+            continue  # seen at once through d_i, whatever C A^j f_i
         if mu < 0:
             raise DesignError(f"fault {names[i]!r}: C A^j f = 0 for every j < n; no sensor ever sees it. Add a sensor.")
         if mu > 0 and not allow_shift:
@@ -572,10 +688,12 @@ def beard_jones_gain(
     if not sep.separable:
         groups = ", ".join("{" + ", ".join(names[j] for j in grp) + "}" for grp in sep.dependent)
         raise DesignError(
-            f"faults {groups} are not output separable: rank [C f_1 ... C f_r] = {sep.rank} < {r} (Lemma 2.1.2). "
+            f"faults {groups} are not output separable: rank [C f_1 ... C f_r] = {sep.rank} < {r} (Lemma 2.1.2"
+            f"{'; a feedthrough d_i stands for C f_i' if any(ft) else ''}). "
             "Design a bank of filters (plan_bank), or replace one direction by A^j f (j > 0) as the patent suggests."
         )
-    spaces = tuple(detection_space(A, C, F[:, i], names[i], rtol) for i in range(r))
+    spaces = tuple(feedthrough_space(A, C, F[:, i], G[:, i], names[i], rtol) if ft[i]  # type: ignore[index]
+                   else detection_space(A, C, F[:, i], names[i], rtol) for i in range(r))
     Dall = np.hstack([s.basis for s in spaces])
     if _rank(Dall, 1e-7) < Dall.shape[1]:
         raise DesignError(
@@ -590,7 +708,7 @@ def beard_jones_gain(
     Ai = A - L0 @ C  # eq. 2.46
     Proj = np.eye(m) - CF @ CFp
     Ci = Proj @ C  # eq. 2.45
-    U = unobservable_subspace(Ai, Ci)  # unobservable subspace, contains every D_i
+    U = unobservable_subspace(Ai, Ci)  # unobservable subspace: every D_i, and the invariant zeros of the order-0 faults
     O = null_basis(U.T) if U.shape[1] else np.eye(n)
     n_obs = O.shape[1]
     # orthonormal basis of the remaining output directions the states reach: range(Ci), not
@@ -621,7 +739,7 @@ def beard_jones_gain(
             f"faults {', '.join(names)} leave unassignable unstable pole(s) {np.round(fixed, 4).tolist()}; "
             "these directions are not mutually detectable in one filter: use a bank of filters (plan_bank)."
         )
-    err = _direction_error(Acl, C, spaces, CF)
+    err = _direction_error(Acl, C, spaces, CF, L)
     if err > 1e-5:
         raise DesignError(f"design check failed: residual direction error {err:.3g} rad (expected 0); rescale the model")
     return BeardJonesDesign(
@@ -630,11 +748,24 @@ def beard_jones_gain(
     )
 
 
-def _direction_error(Acl: Array, C: Array, spaces: Sequence[DetectionSpace], CF: Array) -> float:
-    """Largest angle between ``C Acl^j x`` (x in D_i, j < n) and the fault's output direction [rad]."""
+def _direction_error(Acl: Array, C: Array, spaces: Sequence[DetectionSpace], CF: Array, L: Array) -> float:
+    """Largest angle between ``C Acl^j x`` (x in D_i, j < n) and the fault's output direction [rad].
+
+    For a fault with feedthrough ``d`` (order 0) the residual is ``d n + C e`` with ``e`` driven by
+    ``x = f - L d`` (0 by design): the bound ``sum_(j<n) |C Acl^j x| / |d|`` on the angle ``C e``
+    turns the residual of a unit step over the first n samples (discrete design; in continuous
+    time the same sum of Markov parameters, as a size).
+    """
     n = Acl.shape[0]
     worst = 0.0
     for i, sp in enumerate(spaces):
+        if sp.feedthrough is not None:
+            x, total = sp.f - L @ sp.feedthrough, 0.0
+            for _ in range(n):
+                total += float(np.linalg.norm(C @ x))
+                x = Acl @ x
+            worst = max(worst, float(np.arctan(total / np.linalg.norm(sp.feedthrough))))
+            continue
         X = sp.basis
         for _ in range(n):
             Y = C @ X

@@ -62,12 +62,42 @@ def _kalman(model: LinearModel, process_std: Any, sensor_std: Any, dt_s: float |
 def make_beard_jones(model: LinearModel, faults: Sequence[str] | None = None, detection_pole_radps: float = -4.0,
                      completion_pole_radps: float = -6.0, dt_s: float | None = None, sensor_std: Any = None,
                      process_std: Any = None, alpha: float = 1e-3, max_angle_rad: float = 0.35) -> BeardJonesFilter | BeardJonesBank:
-    """Beard-Jones filter for actuator faults (default: every control input); a bank if they cannot share one.
+    """Beard-Jones filter for actuator faults; a bank if they cannot share one.
 
-    Without ``process_std`` the residual covariance has no process noise (the filter's model is taken as exact).
+    The filter runs on the observable part of ``model``
+    (:func:`~fdi_sim.detectors.beard_jones_filter.observable_realization`: the paired models of
+    both aircraft lose their three accelerometer lag states, unobservable at ``z = 0``). ``faults``
+    defaults to every control input whose feedthrough is not below the sensor noise
+    (:func:`~fdi_sim.detectors.beard_jones_filter.default_faults`): elevator, aileron, rudder and
+    throttle on the F-16, the three surfaces on the DHC-6 (its throttle moves the outputs of its own
+    20 Hz sample by 0.08-0.28 noise sigma at full scale; name it in ``faults`` to get it anyway). An
+    actuator with a feedthrough gets detection order 0 (residual ``D[:, j] n`` exactly); the
+    detection pole applies to faults without one. Without ``process_std`` the residual covariance
+    has no process noise (the filter's model is taken as exact).
+
+    Parameters
+    ----------
+    model : LinearModel
+        Discrete (the detectors' paired form), or continuous with ``dt_s``.
+    faults : sequence of str, optional
+        Input names; default :func:`~fdi_sim.detectors.beard_jones_filter.default_faults`.
+    detection_pole_radps, completion_pole_radps : float
+        Continuous-time poles [1/s], negative (``z = exp(s dt)``).
+    dt_s : float, optional
+        Sample time [s] of a continuous model.
+    sensor_std : float or sequence, optional
+        Measurement noise per output [output units]; default the aircraft's suite.
+    process_std : float or sequence, optional
+        Process noise per state and step [state units].
+    alpha : float
+        Per-sample false-alarm probability of the chi-square threshold [-].
+    max_angle_rad : float
+        Largest residual angle accepted for isolation [rad].
     """
-    faults = list(faults) if faults is not None else _controls(model)
+    from fdi_sim.detectors.beard_jones_filter import default_faults
+
     R = _diag(sensor_std if sensor_std is not None else suite_sensor_std(model), model.n_outputs, "sensor_std")
+    faults = list(faults) if faults is not None else default_faults(model, R)
     Q = _diag(process_std, model.n_states, "process_std") if process_std is not None else None
     designs = plan_bank(model, faults, detection_pole_radps=detection_pole_radps, completion_pole_radps=completion_pole_radps,
                         dt_s=None if model.is_discrete else _dt(model, dt_s), Q=Q, R=R)
@@ -182,7 +212,7 @@ def make_gust_kalman(model: LinearModel, calibration: Any = None, turbulence: st
     """Kalman filter with JSBSim's Dryden gusts and turn-on bias states, windowed innovation test,
     GLR-style signature isolation (``fdi_sim.detectors.gust_kalman``). ``calibration`` (a
     :class:`~fdi_sim.detectors.gust_kalman.Calibration` or its dict) comes from fault-free
-    training flights: :func:`fdi_sim.sim.calibrate.calibrated_gust_kalman` flies them."""
+    training flights: :func:`fdi_sim.training.gust.calibrated_gust_kalman` flies them."""
     from fdi_sim.detectors.gust_kalman import Calibration, GustKalmanDetector, SensorNoise, design_gust_kalman
     from fdi_sim.sensors import load_suite
 

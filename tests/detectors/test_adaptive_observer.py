@@ -435,5 +435,8 @@ def test_registered_observer_detectors_follow_the_contract() -> None:
         outs = [det.step(k / 120, m.u0, m.y0) for k in range(3)]  # trim in, trim out: no alarm
         assert all(not r.alarm and np.all(np.isfinite(r.r)) for r in outs)
         assert outs[0].scores is None or len(outs[0].scores) == len(det.hypotheses)
-    with pytest.raises(DesignError, match="alternatives"):
-        registry.get("detector", "kalman-mmae-v1").factory(m)
+    # without alternatives (a scenario cannot give models): one loss-of-effectiveness model per control input
+    mm = registry.get("detector", "kalman-mmae-v1").factory(m, **noise)
+    assert mm.hypotheses == ("nominal",) + tuple(m.input_names[c] for c in m.control_columns())
+    with pytest.raises(DesignError, match="effectiveness"):
+        registry.get("detector", "kalman-mmae-v1").factory(m, effectiveness=1.0)
