@@ -15,7 +15,7 @@ import numpy as np  # noqa: E402
 
 from fdi_sim.flightlog import read_log  # noqa: E402
 from fdi_sim.scenario import from_dict  # noqa: E402
-from fdi_sim.training import fly  # noqa: E402
+from fdi_sim.sim import run  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "figures"
 T_ON_S = 2.0
@@ -28,7 +28,7 @@ def fly(tmp: Path, aircraft: str, faults: list[dict], name: str, initial: dict, 
                     "maneuvers": maneuvers if maneuvers is not None else
                     [{"type": "doublet-v1", "axis": "elevator", "t_start_s": 3.0, "amplitude_norm": 0.1, "pulse_s": 1.0}],
                     "faults": faults})
-    res = fly(sc, log_path=tmp / f"{name}.mcap", progress=False)
+    res = run(sc, log_path=tmp / f"{name}.mcap", progress=False)
     return read_log(res.log_path).topics
 
 

@@ -102,7 +102,8 @@ def _cmd_repair(args: argparse.Namespace) -> int:
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:
-    from fdi_sim.sim.detect import bank_specs, DEFAULT_RATE_HZ, detect_log, parse_detector_arg, replay_bank, SCENARIO_BANK
+    from fdi_sim.detectors.spec import parse_detector_arg
+    from fdi_sim.offline.detect import bank_specs, DEFAULT_RATE_HZ, detect_log, replay_bank, SCENARIO_BANK
 
     if args.bank in (SCENARIO_BANK, "default") and not args.detector:
         if args.out or args.rate_hz:

@@ -7,7 +7,7 @@ default bank's linear model ``A`` and ``C``, the filter's gains and ``Sigma_m^-1
 design hash and calibration key, all differed between a study's Dask workers, which run with
 ``OPENBLAS_NUM_THREADS=1``, and ``fdi-sim`` in a shell on a 2-core machine). Every design entry
 point (:func:`fdi_sim.linear.linearize.linearize_grid`, :func:`fdi_sim.detectors.gust_kalman.design_gust_kalman`
-and ``calibrate``, :func:`fdi_sim.training.build.build_bank`, :func:`fdi_sim.sim.detect.build_detector`)
+and ``calibrate``, :func:`fdi_sim.training.build.build_bank`, :func:`fdi_sim.detectors.spec.build_detector`)
 and the ``fdi-sim`` command itself run with one BLAS
 thread, so a run flown alone designs exactly what it designed inside a study. The matrices are
 tens of rows: a second thread bought nothing there.

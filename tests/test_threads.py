@@ -22,7 +22,7 @@ import numpy as np
 from threadpoolctl import threadpool_info
 from fdi_sim.detectors.catalogue_observers import make_gust_kalman
 from fdi_sim.scenario import load
-from fdi_sim.sim.detect import model_for_scenario
+from fdi_sim.training.models import model_for_scenario
 
 sha = lambda a: hashlib.sha256(np.ascontiguousarray(a, dtype=np.float64).tobytes()).hexdigest()
 sc = load(sys.argv[1])

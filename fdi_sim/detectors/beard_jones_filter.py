@@ -8,7 +8,7 @@ directions ``f -> int_0^dt e^(A t) dt f``), :func:`plan_bank` groups faults that
 filter, and :class:`BeardJonesFilter` / :class:`BeardJonesBank` run them.
 
 The design needs ``(A, C)`` observable (Lemma 2.1.3, Theorem 2.1.1). The models of
-:func:`fdi_sim.sim.detect.model_for_scenario` (20 Hz, paired form ``(A, B, C A, C B + D)``) are
+:func:`fdi_sim.training.models.model_for_scenario` (20 Hz, paired form ``(A, B, C A, C B + D)``) are
 not: the accelerometer lag states ``n*_lag_g`` (``z_(k+1) = C_i x_k + D_i u_k``, nothing depends on
 them) are invisible to ``C A`` and sit at ``z = 0`` (3 of 13 F-16 and 3 of 15 DHC-6 modes, every
 default-grid point, PBH margin exactly 0; every other mode has a scaled margin of 1.9e-4 or more, the

@@ -38,7 +38,7 @@ The detectors' own ``step`` has no such path (a NaN poisons its state).
 Numbers agree with ``step`` to rounding (sums in another order than numpy's BLAS); cutting a
 flight into blocks of any size never changes a bit. ``fresh`` is not used (a held value is a valid
 measurement); model inputs that are not logged commands (the gust inputs) are held at the model's
-trim (:func:`fdi_sim.sim.detect.run_detector`).
+trim (:func:`fdi_sim.offline.detect.run_detector`).
 """
 from __future__ import annotations
 

@@ -6,11 +6,11 @@ the parity window, the directional observers and the steady Kalman filter; the g
 kinematic checks) the bank uses it. The rest (the adaptive observer, the time-varying Kalman
 filter, the multiple-model bank, and a plugin that only offers ``step``) run through
 :class:`StepStream`, which calls ``step`` once per sample in Python: the same numbers as
-``fdi-sim detect`` gives offline (:func:`fdi_sim.sim.detect.run_detector` feeds the same absolute
+``fdi-sim detect`` gives offline (:func:`fdi_sim.offline.detect.run_detector` feeds the same absolute
 values), at Python's cost, about 20-200 us a sample instead of under 1 us. It is the one member
 kind that fails the contract's "no Python work per sample" check, and the checker says so.
 
-Inputs as in :func:`fdi_sim.sim.detect.run_detector`: the model's inputs that the loop logs come
+Inputs as in :func:`fdi_sim.offline.detect.run_detector`: the model's inputs that the loop logs come
 from ``u``; the others (the gust inputs) are held at trim; each output's deviation from trim is
 wrapped where it is a heading (:func:`fdi_sim.detectors.samples.is_wrapped`). A sample with any
 output not ``ok`` (a dropout, a non-finite value, a sensor excluded by reconfiguration) is not

@@ -24,7 +24,7 @@ detector is valid again ``s + 1`` samples after the last bad one. (The detector'
 on a non-finite input instead.)
 
 Model inputs that are not logged commands (the gust inputs ``u_gust_body_fps`` ...) are held at
-the model's trim, as :func:`fdi_sim.sim.detect.run_detector` does. ``fresh`` is not used: a held
+the model's trim, as :func:`fdi_sim.offline.detect.run_detector` does. ``fresh`` is not used: a held
 value is a valid measurement at the sample.
 
 Numbers: the products are summed in a different order than numpy's BLAS (``G @ window``), so the

@@ -337,10 +337,10 @@ def fly(cfg: StudyConfig, eta: float, seed: int, faulty: bool, out_dir: str | Pa
         The flight did not complete.
     """
     from fdi_sim.scenario import from_dict
-    from fdi_sim.training import fly
+    from fdi_sim import training
 
     sc = from_dict(scenario_dict(cfg, eta, seed, faulty))
-    res = fly(sc, log_path=Path(out_dir) / f"{sc.name}_seed{seed}.mcap", progress=False)
+    res = training.fly(sc, log_path=Path(out_dir) / f"{sc.name}_seed{seed}.mcap", progress=False)
     if res.status != "completed":
         raise DesignError(f"flight {sc.name} seed {seed} ended {res.status}: {res.summary.reason}")
     return flight_samples(read_log(res.log_path), cfg.dt_s, eta, seed)

@@ -462,7 +462,7 @@ def review_log(path: str | Path) -> RunReview:
 def review_flight_log(log: FlightLog, path: str, notes: Sequence[str] = ()) -> RunReview:
     """:func:`review_log` of a log already read (``path`` is what the user named)."""
     from fdi_sim.decision.outcome import fault_outcome
-    from fdi_sim.sim.detect import fault_windows
+    from fdi_sim.offline.detect import fault_windows
     from fdi_sim.study.stats import exposure_s, merge_episodes, rate
 
     _check_fdi_sim_log(log, path)

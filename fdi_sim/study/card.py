@@ -40,7 +40,9 @@ from fdi_sim.scenario import Scenario, load
 from fdi_sim.scenario.shipped import shipped_dir
 from fdi_sim.training.flights import DEFAULT_TARGET, fly_training, training_seeds
 from fdi_sim.decision.outcome import alarm_onsets, fault_outcome
-from fdi_sim.sim.detect import build_detector, DetectorSpec, DetectorTrace, fault_windows, LogModel, model_for_scenario, run_detector, run_vectorised
+from fdi_sim.detectors.spec import build_detector, DetectorSpec
+from fdi_sim.offline.detect import DetectorTrace, fault_windows, run_detector, run_vectorised
+from fdi_sim.training.models import LogModel, model_for_scenario
 
 RATE_HZ = 20.0
 HELD_OUT_SEEDS: tuple[int, ...] = tuple(range(101, 109))

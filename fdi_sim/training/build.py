@@ -120,10 +120,10 @@ class MemberContext:
     _lm: Any = None
 
     def log_model(self) -> Any:
-        """The scenario's initial point trimmed and linearized (:func:`fdi_sim.sim.detect.model_for_scenario`),
+        """The scenario's initial point trimmed and linearized (:func:`fdi_sim.training.models.model_for_scenario`),
         made once: ``.model`` at the bank's rate in the samples' form, ``.continuous()``."""
         if self._lm is None:
-            from fdi_sim.sim.detect import model_for_scenario
+            from fdi_sim.training.models import model_for_scenario
 
             self._lm = model_for_scenario(self.sc, self.sc.model.fdi.rate_hz)
         return self._lm
@@ -175,7 +175,7 @@ def _model_stream(ctx: MemberContext, m: MemberSpec, *, design_model: Any = None
     :class:`~fdi_sim.detectors.step_stream.StepStream`."""
     from fdi_sim.detectors.step_stream import StepStream
     from fdi_sim.detectors.stream import StreamingDetector
-    from fdi_sim.sim.detect import build_detector, DetectorSpec
+    from fdi_sim.detectors.spec import build_detector, DetectorSpec
 
     sc = ctx.sc
     params = {k: v for k, v in m.params.items() if k not in ENTRY_KEYS}
@@ -221,7 +221,7 @@ def _gust_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
     from fdi_sim.detectors.gust_kalman_stream import GustKalmanStream
     from fdi_sim.detectors.scheduled import GustKalmanSchedule
     from fdi_sim.training.gust import calibrated_gust_kalman
-    from fdi_sim.sim.detect import model_for_scenario
+    from fdi_sim.training.models import model_for_scenario
     from fdi_sim.training.gust import CALIBRATION_OPTIONS
 
     f = sc.model.fdi
@@ -271,7 +271,7 @@ def _kinematic_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
     """A kinematic check: its catalogue design for the aircraft and the turbulence level."""
     sc = ctx.sc
     from fdi_sim.detectors.kinematic_stream import KinematicStream
-    from fdi_sim.sim.detect import build_detector, DetectorSpec
+    from fdi_sim.detectors.spec import build_detector, DetectorSpec
 
     params = {"turbulence": sc.model.atmosphere.turbulence, "aircraft": sc.aircraft,
               **{k: v for k, v in m.params.items() if k not in ENTRY_KEYS}}

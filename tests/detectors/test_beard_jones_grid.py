@@ -37,7 +37,8 @@ from fdi_sim.detectors.beard_jones_filter import (
 from fdi_sim.detectors.noise import suite_sensor_std
 from fdi_sim.linear.model import LinearModel
 from fdi_sim.scenario.loader import load
-from fdi_sim.sim.detect import DetectorSpec, build_detector, model_for_scenario
+from fdi_sim.detectors.spec import build_detector, DetectorSpec
+from fdi_sim.training.models import model_for_scenario
 
 SCENARIOS = sorted((Path(__file__).resolve().parents[2] / "scenarios").glob("*.toml"))
 RATE_HZ = 20.0

@@ -22,7 +22,7 @@ from fdi_sim.scenario import load
 from fdi_sim.training import fly
 from fdi_sim.training.flights import fault_free
 from fdi_sim.training.gust import calibrated_gust_kalman
-from fdi_sim.sim.detect import fault_windows
+from fdi_sim.offline.detect import fault_windows
 
 REPO = Path(__file__).resolve().parents[2]
 

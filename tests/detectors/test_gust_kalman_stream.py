@@ -17,7 +17,7 @@ from fdi_sim.flightlog import read_log
 from fdi_sim.scenario import load
 from fdi_sim.training import fly
 from fdi_sim.training.flights import fault_free
-from fdi_sim.sim.detect import model_for_scenario
+from fdi_sim.training.models import model_for_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 

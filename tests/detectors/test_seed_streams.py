@@ -34,7 +34,7 @@ T_FAULT = 300
 @pytest.fixture(scope="module")
 def lm():
     from fdi_sim.scenario.loader import load
-    from fdi_sim.sim.detect import model_for_scenario
+    from fdi_sim.training.models import model_for_scenario
 
     return model_for_scenario(load("scenarios/f16_stuck_elevator.toml"), 20.0)
 
@@ -76,7 +76,7 @@ def _flight(model: LinearModel, cmd: tuple[str, ...], seed: int, *, actuator: in
 
 
 def _reference(det, model, stream, t, u, y):
-    """The detector's own ``step`` on the same samples (as :func:`fdi_sim.sim.detect.run_detector`):
+    """The detector's own ``step`` on the same samples (as :func:`fdi_sim.offline.detect.run_detector`):
     statistic, validity, isolation on alarm, and the scores (a directional filter's angles [rad])."""
     cols = [list(model.input_names).index(nm) for nm in stream.input_names]
     u_full = np.tile(np.asarray(model.u0, float), (len(t), 1))
@@ -114,7 +114,7 @@ def _same(a: BlockOutputs, b: BlockOutputs) -> None:
 # --- the cases ----------------------------------------------------------------------------------
 def _build(case: str, lm):
     """``(detector, design model, command names, flight)`` of a case."""
-    from fdi_sim.sim.detect import build_detector, DetectorSpec
+    from fdi_sim.detectors.spec import build_detector, DetectorSpec
 
     model = lm.model
     outs = list(model.output_names)
@@ -345,7 +345,7 @@ def test_heading_deviation_is_wrapped() -> None:
 
 
 def test_design_key_and_threshold(lm) -> None:
-    from fdi_sim.sim.detect import build_detector, DetectorSpec
+    from fdi_sim.detectors.spec import build_detector, DetectorSpec
 
     model = lm.model
     k = [stream_design_key(compiled_stream(build_detector(DetectorSpec("parity-v1", p), model), model, CMD, "x"))

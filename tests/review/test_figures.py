@@ -223,7 +223,7 @@ def test_sections_in_order_and_every_spec_is_json(logs: dict[str, FlightLog]) ->
 
 
 def test_the_fault_band_spans_exactly_the_catalog_window(logs: dict[str, FlightLog]) -> None:
-    from fdi_sim.sim.detect import fault_windows
+    from fdi_sim.offline.detect import fault_windows
 
     catalog = fault_windows(logs["gyro"])
     assert [f["windows_s"] for f in catalog] == [[[10.0, 21.0]]]

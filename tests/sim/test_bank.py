@@ -16,7 +16,7 @@ from fdi_sim.scenario import load, loads
 from fdi_sim.scenario.loader import from_dict
 from fdi_sim.training import fly
 from fdi_sim.training.build import replay_log
-from fdi_sim.sim.detect import replay_bank
+from fdi_sim.offline.detect import replay_bank
 
 ROOT = Path(__file__).resolve().parents[2]
 #: short calibrations keep the suite fast (the shipped default is 24 x 300 s)

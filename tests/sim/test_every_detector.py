@@ -19,7 +19,8 @@ from fdi_sim.detectors.check import CORRECTNESS, check_stream, contract_inputs
 from fdi_sim.flightlog import read_log
 from fdi_sim.scenario.loader import from_dict, load
 from fdi_sim.training.build import bank_for_log
-from fdi_sim.sim.detect import model_for_scenario, replay_bank
+from fdi_sim.offline.detect import replay_bank
+from fdi_sim.training.models import model_for_scenario
 from fdi_sim.training import fly
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -12,11 +12,10 @@ fault (the log's fault truth), the onset, the first alarm after it, the delay an
 from __future__ import annotations
 
 import difflib
-import inspect
 import json
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -24,16 +23,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim import registry
-from fdi_sim.detectors.samples import Samples, log_samples, paired_model
-from fdi_sim.errors import DesignError, LogError, ScenarioError
+from fdi_sim.detectors.samples import Samples, log_samples
+from fdi_sim.detectors.spec import DetectorSpec, build_detector, check_options
+from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.bank.members import DEFAULT_BANKS
 from fdi_sim.flightlog import METADATA_SCENARIO, TOPIC_FAULT_EVENTS, fdi_topic, read_log
 from fdi_sim.flightlog.copy import NewEventTopic, NewVectorTopic, write_extended
 from fdi_sim.flightlog.reader import FlightLog
 from fdi_sim.flightlog.schemas import ALARM_JSON_SCHEMA, TOPIC_FDI_ALARMS
-from fdi_sim.threads import single_blas_thread
 from fdi_sim.decision.outcome import FaultOutcome, alarm_onsets, fault_outcome
 from fdi_sim.training.gust import CALIBRATION_OPTIONS
+from fdi_sim.training.models import LogModel, model_for_log
 from fdi_sim.units import S_PER_H
 
 DEFAULT_RATE_HZ = 20.0
@@ -56,51 +56,6 @@ def bank_specs(name: str) -> list[DetectorSpec]:
         raise ScenarioError("--bank", name, f"unknown bank {name!r}{hint}", f"one of {', '.join(BANKS)}, "
                             f"{SCENARIO_BANK} (the log's own in-loop bank)")
     return [DetectorSpec(i) for i in BANKS[name]]
-
-
-@dataclass(frozen=True)
-class DetectorSpec:
-    """A detector to run: registry id and design options."""
-
-    id: str
-    params: Mapping[str, Any] = field(default_factory=dict)
-
-
-def parse_detector_arg(text: str) -> DetectorSpec:
-    """``ID[:key=value,...]``; values are JSON (numbers, true/false, lists, quoted strings) or bare words.
-
-    Raises
-    ------
-    ScenarioError
-        A malformed option.
-    """
-    ident, _, opts = text.partition(":")
-    params: dict[str, Any] = {}
-    if opts:
-        for item in _split_options(opts):
-            key, eq, raw = item.partition("=")
-            if not eq or not key.strip():
-                raise ScenarioError("--detector", text, f"option {item!r} is not key=value",
-                                    "write ID:key=value,key2=value2")
-            try:
-                params[key.strip()] = json.loads(raw)
-            except json.JSONDecodeError:
-                params[key.strip()] = raw.strip()
-    return DetectorSpec(ident.strip(), params)
-
-
-def _split_options(opts: str) -> list[str]:
-    """Split on commas outside brackets (``faults=["a","b"],alpha=0.01``)."""
-    out, depth, cur = [], 0, ""
-    for ch in opts:
-        depth += ch in "[{"
-        depth -= ch in "]}"
-        if ch == "," and depth == 0:
-            out.append(cur)
-            cur = ""
-        else:
-            cur += ch
-    return out + ([cur] if cur else [])
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,72 +137,6 @@ def fault_windows(log: FlightLog) -> list[dict[str, Any]]:
         if e.payload.get("event") == "catalog":
             return [dict(f) for f in e.payload.get("faults", [])]
     return []
-
-
-@dataclass(frozen=True, eq=False)
-class LogModel:
-    """What a log's detectors are designed from."""
-
-    scenario: Any
-    schedule: Any
-    model: Any
-    aircraft: str
-
-    def continuous(self) -> Any:
-        """The continuous linearization at the log's initial point."""
-        return self.schedule.continuous_at(self.scenario.operating_point())
-
-
-def model_for_log(log: FlightLog, rate_hz: float) -> LogModel:
-    """Trim and linearize the log's initial point; the model at ``rate_hz`` in the samples' form."""
-    from fdi_sim.scenario.loader import from_dict
-
-    meta = log.metadata.get(METADATA_SCENARIO)
-    if not meta or "json" not in meta:
-        raise LogError(str(log.path), "no 'scenario' metadata record: not a log written by `fdi-sim run`, so its "
-                       "aircraft and operating point are unknown")
-    sc = from_dict(json.loads(meta["json"]), source=f"{log.path} (scenario metadata)")
-    return model_for_scenario(sc, rate_hz)
-
-
-def model_for_scenario(sc: Any, rate_hz: float) -> LogModel:
-    """Trim and linearize a scenario's initial point (one point, no validation, a few seconds)."""
-    from fdi_sim.linear.grid import parse_grid_spec
-    from fdi_sim.linear.linearize import linearize_grid
-
-    ini = sc.model.initial
-    speed = f"vt_kts={ini.vt_kts}" if getattr(ini, "vt_kts", None) else f"vc_kts={ini.vc_kts}"
-    spec = f"h_ft={ini.h_ft};{speed}"
-    if getattr(ini, "flaps_deg", 0.0):
-        spec += f";flaps_deg={ini.flaps_deg}"
-    sched = linearize_grid(parse_grid_spec(spec, sc.aircraft), validate=False)
-    found = sched.model_at(sc.operating_point(), dt_s=1.0 / rate_hz)
-    return LogModel(sc, sched, paired_model(found.model, float(sc.model.rate_hz)), sc.aircraft)
-
-
-@single_blas_thread
-def build_detector(spec: DetectorSpec, model: Any) -> Any:
-    """Design one registered detector from ``model``; unknown options get a "did you mean"."""
-    check_options(spec)
-    return registry.get("detector", spec.id).factory(model, **dict(spec.params))
-
-
-def check_options(spec: DetectorSpec, extra: Sequence[str] = ()) -> None:
-    """Refuse an option the detector's factory does not take (with a "did you mean")."""
-    plugin = registry.get("detector", spec.id)
-    try:
-        sig = inspect.signature(plugin.factory)
-        known = [p for p in sig.parameters if p != "model"]
-        has_var = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
-    except (TypeError, ValueError):
-        known, has_var = [], True
-    known = [*known, *extra]
-    for k in spec.params:
-        if not has_var and k not in known:
-            close = difflib.get_close_matches(k, known, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise ScenarioError("--detector", f"{spec.id}:{k}", f"unknown option {k!r}{hint}",
-                                f"options of {spec.id}: {', '.join(known)}")
 
 
 def run_detector(det: Any, ident: str, samples: Samples, model: Any) -> DetectorTrace:
