@@ -29,7 +29,7 @@ def test_readme_scenario_example_loads_and_its_plugin_lists_are_the_registry() -
     from fdi_sim.scenario import loads
 
     text = (ROOT / "README.md").read_text()
-    (toml,) = re.findall(r"```toml\n(.*?)```", text, flags=re.S)
+    (toml,) = [b for b in re.findall(r"```toml\n(.*?)```", text, flags=re.S) if "[[maneuvers]]" in b]  # the scenario
     sc = loads(toml, "README.md")
     assert [tid for tid, _ in sc.faults] == ["actuator-stuck-v1", "sensor-bias-v1"]
     listed = re.search(r"\[\[maneuvers\]\]\s+# (.*)", toml).group(1).split(", ")

@@ -8,6 +8,10 @@ JSBSim here is what bench_loop.py measures: one command write and one ``fly()`` 
 moderate turbulence. The bank's designs and thresholds come from the cache (the first run
 calibrates). Then a profile of one full-log run: where the wall time of the loop goes. Never a
 timed assertion in the suite.
+
+The last row per aircraft is a bank of every registered detector (issue 23's cost of the whole
+registry in the loop), as a study logs it. ``--study-only`` measures the study-mode rows only
+(the default bank and every detector): ``python tests/benchmarks/bench_bank.py 300 --study-only``.
 """
 from __future__ import annotations
 
@@ -44,9 +48,18 @@ CASES = {"f16": (10000.0, "vt_kts = 400.0"), "DHC6": (5000.0, "vc_kts = 120.0")}
 
 
 def scenario(ac: str, T: float, bank: str, per_step: bool, block_s: float = 0.5, residuals: bool = True):
+    """``bank = "every"``: a bank of every registered detector (thresholds trained on four 60 s
+    flights: only the cost is measured here)."""
+    from fdi_sim import registry
+
     h, speed = CASES[ac]
-    return loads(SC.format(ac=ac, T=T, h=h, speed=speed, bank=bank, per_step=str(per_step).lower(), block_s=block_s,
-                           resid=str(residuals).lower()))
+    text = SC.format(ac=ac, T=T, h=h, speed=speed, bank="none" if bank == "every" else bank,
+                     per_step=str(per_step).lower(), block_s=block_s, resid=str(residuals).lower())
+    if bank == "every":
+        text = text.replace("[fdi]\n", "[fdi]\ncalibration_flights = 4\ncalibration_duration_s = 60.0\n"
+                            'thresholds = "trained"\n')
+        text += "".join(f'\n[[detectors]]\ntype = "{i}"\n' for i in registry.ids("detector"))
+    return loads(text)
 
 
 def loop_rate(sc, d: str) -> float:
@@ -60,9 +73,12 @@ def main(T: float = 120.0, repeats: int = 3) -> None:
     with tempfile.TemporaryDirectory() as d:
         for ac in CASES:
             # the last: as a Monte Carlo study logs (fdi_sim.study.spec: FDI topics, no residuals)
-            for bank, per_step, block, resid in (("none", True, 0.5, True), ("default", True, 0.5, True),
-                                                 ("none", False, 0.5, True), ("default", False, 0.5, True),
-                                                 ("default", False, 1.0, True), ("default", False, 0.5, False)):
+            cases = (("none", True, 0.5, True), ("default", True, 0.5, True), ("none", False, 0.5, True),
+                     ("default", False, 0.5, True), ("default", False, 1.0, True), ("default", False, 0.5, False),
+                     ("every", False, 0.5, False))
+            if "--study-only" in sys.argv:  # the study-mode rows only: the default bank and every detector
+                cases = tuple(c for c in cases if c[1] is False and c[3] is False)
+            for bank, per_step, block, resid in cases:
                 sc = scenario(ac, T, bank, per_step, block, resid)
                 fly(scenario(ac, 2.0, bank, per_step, block, resid), d, progress=False, force=True)  # designs, compile
                 bare, loop = [], []
@@ -73,7 +89,7 @@ def main(T: float = 120.0, repeats: int = 3) -> None:
                 log = "full" if per_step else ("fdi only" if resid else "study")
                 print(f"{ac:8} {log:10} {bank:8} {block:7g} {b:13.0f} {lp:13.0f} {lp / b:6.2f} "
                       f"{1e6 / lp - 1e6 / b:17.1f}", flush=True)
-        for ac in CASES:
+        for ac in CASES if "--study-only" not in sys.argv else ():
             sc = scenario(ac, T, "default", True)
             prof = cProfile.Profile()
             prof.enable()
@@ -86,4 +102,5 @@ def main(T: float = 120.0, repeats: int = 3) -> None:
 
 
 if __name__ == "__main__":
-    main(float(sys.argv[1]) if len(sys.argv) > 1 else 120.0)
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    main(float(args[0]) if args else 120.0)

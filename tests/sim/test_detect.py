@@ -28,7 +28,7 @@ def gyro_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_detect_json_shape_and_out_log(gyro_log: Path, tmp_path: Path) -> None:
     out = tmp_path / "det.mcap"
     r = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "detect", str(gyro_log), "--detector",
-                        "kalman-nis-v1:sensor_std=0.01", "--detector", "kalman-mmae-v1", "--json", "--out", str(out)],
+                        "kalman-nis-v1:sensor_std=0.01", "--detector", "kalman-mmae-v1:effectiveness=1.0", "--json", "--out", str(out)],
                        capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
@@ -43,7 +43,7 @@ def test_detect_json_shape_and_out_log(gyro_log: Path, tmp_path: Path) -> None:
     assert fault["label"] == "q_radps_bias" and fault["t_onset_s"] == 10.0
     for key in ("first_alarm_s", "isolated_as"):
         assert key in fault
-    assert "alternatives" in par["error"], "kalman-mmae-v1 without alternative models refuses with its reason"
+    assert "effectiveness must be in [0, 1)" in par["error"], "a design that fails is reported with its reason"
     # the out file: every input topic with its counts (the in-loop bank's /fdi topics among them),
     # plus the offline detector's statistic and alarms under /fdi/offline
     src, det = read_log(gyro_log), read_log(out)

@@ -42,7 +42,7 @@ def _scenario_path() -> Path:
 def model():
     """The F-16 at 10 kft / 400 KTAS, discretized at 20 Hz in the samples' standard form."""
     from fdi_sim.scenario.loader import load
-    from fdi_sim.sim.detect import model_for_scenario
+    from fdi_sim.training.models import model_for_scenario
 
     return model_for_scenario(load(str(_scenario_path())), RATE_HZ).model
 
