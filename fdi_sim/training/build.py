@@ -49,7 +49,8 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
     ScenarioError
         A detector that cannot run in the loop.
     DesignError
-        A detector that cannot be designed (``on_design_failure = "refuse"``), with where and why.
+        A detector that cannot be designed (``on_design_failure = "refuse"``; with ``"skip"`` it is
+        left out and the bank's notes say why), with where and why.
     """
     from fdi_sim.bank.runtime import DecisionConfig, FdiBank
 
@@ -63,9 +64,17 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
     ctx = MemberContext(sc, tuple(cmd_names), tuple(meas_names), progress, logs)
     streams, notes = [], []
     for m in members:
-        stream, note = member_stream(ctx, m)
+        try:
+            stream, note = member_stream(ctx, m)
+        except DesignError as exc:
+            if f.on_design_failure != "skip":
+                raise
+            notes.append(f"{m.id}: skipped, it cannot be designed here ({exc})")  # on_design_failure = "skip"
+            continue
         streams.append(stream)
         notes.append(note)
+    if not streams:
+        raise DesignError(f"{sc.source}: no member of the bank could be designed: {'; '.join(notes)}")
     if f.decision == "angle-magnitude":
         bad = [s.id for s in streams if not s.fault_directions]
         if bad:
@@ -208,9 +217,10 @@ def _model_stream(ctx: MemberContext, m: MemberSpec, *, design_model: Any = None
 
         fails = check_stream(stream, contract_inputs(stream, model, rate_hz=sc.model.fdi.rate_hz))
         wrong = [f for f in fails if f.check in CORRECTNESS]
-        if wrong:
-            raise DesignError(f"{sc.source}: plugin detector {m.id} ({origin}) fails its contract check: "
-                              + "; ".join(str(f) for f in wrong))
+        if wrong:  # refused whatever on_design_failure says: its numbers would be wrong, not missing
+            raise ScenarioError(sc.source, m.source, f"plugin detector {m.id} ({origin}) fails its contract check: "
+                                + "; ".join(str(f) for f in wrong), "fix the plugin (fdi_sim.detectors.check."
+                                "check_stream runs the same checks), or remove it from the scenario")
         how = f"plugin from {origin}" + "".join(f"; {f}" for f in fails)
     return stream, f"{m.id}: one design at the initial point ({where}), {how}"
 

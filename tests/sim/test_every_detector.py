@@ -104,3 +104,25 @@ def test_no_python_work_per_sample(streams, ident):
     stream = next(m.stream for m in bank.members if m.id == ident)
     fails = check_stream(stream, contract_inputs(stream, model, rate_hz=bank.rate_hz), checks=("python-per-sample",))
     assert not fails, [str(f) for f in fails]
+
+
+@pytest.mark.parametrize("on_failure", ["refuse", "skip"])
+def test_a_member_that_cannot_be_designed_is_refused_or_skipped(tmp_path, on_failure):
+    from fdi_sim.cli import main
+
+    text = (ROOT / "scenarios" / "f16_cruise_doublets.toml").read_text()
+    text += (f'\n[fdi]\ncalibration_flights = 3\ncalibration_duration_s = 60.0\non_design_failure = "{on_failure}"\n'
+             '[[detectors]]\ntype = "kalman-mmae-v1"\neffectiveness = 1.0\n'
+             '[[detectors]]\ntype = "kinematic-attitude-v1"\n')
+    scn = tmp_path / "s.toml"
+    scn.write_text(text)
+    log = tmp_path / "s.mcap"
+    code = main(["run", str(scn), "--log", str(log), "--duration", "10", "--quiet"])
+    if on_failure == "refuse":
+        assert code == 2 and not log.exists()
+        return
+    assert code == 0
+    fdi = read_log(log).metadata["fdi"]
+    assert [m["id"] for m in json.loads(fdi["members"])] == ["kinematic-attitude-v1"]
+    (note,) = [n for n in json.loads(fdi["notes"]) if n.startswith("kalman-mmae-v1")]
+    assert "skipped" in note and "effectiveness must be in [0, 1)" in note
