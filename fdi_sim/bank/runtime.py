@@ -37,12 +37,11 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.decision.failure_log import FailureLogger
-from fdi_sim.decision.persistence import k_of_n_step
+from fdi_sim.bank.kernels import average_commands, decide, gather_columns, statistic_rows, take_columns
 from fdi_sim.bank.topics import RECONFIG_JSON_SCHEMA, STAT_FIELDS, TOPIC_FDI_RECONFIG, msg_name
 from fdi_sim.decision.outcome import LATE_GRACE_S, fault_outcome
 from fdi_sim.errors import DesignError
@@ -51,89 +50,6 @@ from fdi_sim.errors import DesignError
 ACTUATOR_INPUTS = ("elevator_cmd_norm", "aileron_cmd_norm", "rudder_cmd_norm", "throttle_cmd_norm")
 #: the largest rescale (an effectiveness estimate below 1/3 is not made up: the stops would cut it)
 MAX_COMMAND_SCALE = 3.0
-
-
-@numba.njit(cache=True, nogil=True)
-def average_commands(rows, n, out):  # pragma: no cover - compiled
-    """``out[j] = (1/n) sum_{i<n} rows[j n + i]``, summed in row order (the time convention's
-    average; sequential so that the loop and a replay of the log give the same bits)."""
-    J, m = out.shape
-    for j in range(J):
-        for c in range(m):
-            acc = 0.0
-            for i in range(n):
-                acc += rows[j * n + i, c]
-            out[j, c] = acc / n
-
-
-@numba.njit(cache=True, nogil=True)
-def _gather(meas, valid, cols, excluded, every, row0, n, y, ok, fresh):  # pragma: no cover - compiled
-    """A member's columns of the block: values, usability (valid, finite, not excluded) and
-    freshness (the sensor sampled at this row: ``row % every == 0``)."""
-    S = y.shape[0]
-    for j in range(S):
-        row = row0 + (j + 1) * n
-        for c in range(cols.shape[0]):
-            v = meas[j, cols[c]]
-            y[j, c] = v
-            ok[j, c] = valid[j, cols[c]] and math.isfinite(v) and not excluded[c]
-            fresh[j, c] = row % every[c] == 0
-
-
-@numba.njit(cache=True, nogil=True)
-def _take_cols(src, cols, out):  # pragma: no cover - compiled
-    """``out[j, c] = src[j, cols[c]]`` (a member's inputs from the command averages)."""
-    for j in range(out.shape[0]):
-        for c in range(cols.shape[0]):
-            out[j, c] = src[j, cols[c]]
-
-
-@numba.njit(cache=True, nogil=True)
-def _stat_rows(stat, thr, exceed, alarm, valid, iso, point, out):  # pragma: no cover - compiled
-    """The rows of ``/fdi/<id>/statistic`` (:data:`STAT_FIELDS` after ``t_s``)."""
-    for j in range(stat.shape[0]):
-        out[j, 0] = stat[j]
-        out[j, 1] = thr[j]
-        out[j, 2] = 1.0 if exceed[j] else 0.0
-        out[j, 3] = 1.0 if alarm[j] else 0.0
-        out[j, 4] = 1.0 if valid[j] else 0.0
-        out[j, 5] = iso[j]
-        out[j, 6] = point[j]
-
-
-@numba.njit(cache=True, nogil=True)
-def _decide(stat, thr, valid, hyp, k, need_direction, ring, st, votes, exceed, alarm, iso, lead):  # pragma: no cover
-    """k-of-n persistence and the isolation vote, carried across blocks.
-
-    ``ring`` (n,) last exceedances; ``st`` = [ring position, count, alarm on, leader, leader votes,
-    an alarm in this call];
-    ``votes`` (H,) votes of the current alarm; ``lead`` gets the leader's votes at each sample. With ``need_direction`` (the two-step rule) a sample
-    exceeds only if its residual is also within the angle bound of some fault direction
-    (``hyp >= 0``: the detector's cosine test passed)."""
-    st[5] = 0
-    for j in range(stat.shape[0]):
-        e = valid[j] and stat[j] > thr[j] and (hyp[j] >= 0 or not need_direction)
-        exceed[j] = e
-        on = k_of_n_step(e, k, ring, st)  # the one k-of-n kernel (st[0], st[1]: ring position, count)
-        if on:
-            h = hyp[j]
-            if e and h >= 0:
-                votes[h] += 1
-                if votes[h] > st[4]:
-                    st[4] = votes[h]
-                    st[3] = h
-        else:
-            if st[2]:
-                for h in range(votes.shape[0]):
-                    votes[h] = 0
-                st[3] = -1
-                st[4] = 0
-        st[2] = 1 if on else 0
-        if on:
-            st[5] = 1
-        alarm[j] = on
-        iso[j] = st[3] if on else -1
-        lead[j] = st[4] if on else 0
 
 
 @dataclass(frozen=True)
@@ -272,13 +188,13 @@ class _Member:
             y, ok, fresh, u, ex, al, iso, lead = (a[:S] for a in (self.y, self.ok, self.fresh, self.u, self.exceed,
                                                                   self.alarm, self.iso, self.lead))
             out = self.out.rows(S)
-        _gather(meas, valid, self.cols, self.excluded, self.every, row0, n, y, ok, fresh)
-        _take_cols(u_avg, self.in_cols, u)
+        gather_columns(meas, valid, self.cols, self.excluded, self.every, row0, n, y, ok, fresh)
+        take_columns(u_avg, self.in_cols, u)
         self.j_start = int(getattr(self.stream, "samples_seen", 0))  # the block's first sample (estimators)
         self.stream.process_block(t[:S] if S != t.shape[0] else t, u, y, ok, fresh, out)
         if unarmed:  # before the bank is armed the statistic is logged, never decided on
             out.valid[:unarmed] = False
-        _decide(out.statistic, out.threshold, out.valid, out.hypothesis, self.decision.k, self.angle_rule, self.ring,
+        decide(out.statistic, out.threshold, out.valid, out.hypothesis, self.decision.k, self.angle_rule, self.ring,
                 self.st, self.votes, ex, al, iso, lead)
         if self.keep:
             for k in TRACE_FIELDS:
@@ -689,9 +605,9 @@ class FdiBank:
     def _log(self, t: NDArray[np.float64], S: int) -> None:
         for m in self.members:
             if S == m.full_S:  # the loop's case: the arrays themselves (eight slices cost ~1.5 us)
-                _stat_rows(m.stat, m.thr, m.exceed, m.alarm, m.valid, m.iso, m.point, m.rows)
+                statistic_rows(m.stat, m.thr, m.exceed, m.alarm, m.valid, m.iso, m.point, m.rows)
             else:
-                _stat_rows(m.stat[:S], m.thr[:S], m.exceed[:S], m.alarm[:S], m.valid[:S], m.iso[:S], m.point[:S],
+                statistic_rows(m.stat[:S], m.thr[:S], m.exceed[:S], m.alarm[:S], m.valid[:S], m.iso[:S], m.point[:S],
                            m.rows[:S])
         # every channel's rows before the writer's flush boundary first, then the rest: each chunk
         # then holds the same sample times on every /fdi channel (writer.window_end_s)

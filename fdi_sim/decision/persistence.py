@@ -32,7 +32,7 @@ def k_of_n_step(fired, k, ring, state):  # pragma: no cover - compiled
     ``count_j = count_{j-1} + a_j - a_{j-n}`` over a ring of the last ``n`` results (``ring``,
     int64 (n,), starts all 0: a reset window holds no firing); ``state[0]`` is the ring position,
     ``state[1]`` the count. The alarm is ``count_j >= k``. Called per sample by the bank's decision
-    (:func:`fdi_sim.bank.runtime._decide`) and by :meth:`Persistence.step`; :func:`k_of_n` is its
+    (:func:`fdi_sim.bank.kernels.decide`) and by :meth:`Persistence.step`; :func:`k_of_n` is its
     vectorised twin (a test checks the two against each other).
     """
     pos = state[0]

@@ -145,7 +145,7 @@ def persistence_series(stat: NDArray[np.float64], valid: NDArray[np.bool_], k: i
     are valid).
 
     "At least ``k`` of the last ``n`` valid samples exceed ``thr``" holds exactly when this
-    series exceeds ``thr`` (:func:`fdi_sim.bank.runtime._decide`, whose ring starts empty at a reset),
+    series exceeds ``thr`` (:func:`fdi_sim.bank.kernels.decide`, whose ring starts empty at a reset),
     so a threshold set on its upcrossings sets the alarm episodes themselves.
 
     Parameters

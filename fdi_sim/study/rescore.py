@@ -1,7 +1,7 @@
 """Re-scoring a finished study at other thresholds and decision rules, without flying again.
 
 Every run's log keeps, per bank member, ``/fdi/<id>/statistic`` at the detector rate
-(:data:`fdi_sim.bank.topics.STAT_FIELDS`). The bank's decision (:func:`fdi_sim.bank.runtime._decide`,
+(:data:`fdi_sim.bank.topics.STAT_FIELDS`). The bank's decision (:func:`fdi_sim.bank.kernels.decide`,
 rule ``persistence``) is a function of three of its columns only::
 
     e_j = valid_j and statistic_j > threshold_j          (exceedance)
@@ -163,7 +163,7 @@ def episodes_of(alarm: NDArray[np.bool_]) -> Episodes:
 
 def alarm_episodes(stat: NDArray[np.float64], thr: NDArray[np.float64], valid: NDArray[np.bool_],
                    k: int, n: int) -> Episodes:
-    """The bank's alarm episodes (:func:`fdi_sim.bank.runtime._decide`, rule ``persistence``) from a
+    """The bank's alarm episodes (:func:`fdi_sim.bank.kernels.decide`, rule ``persistence``) from a
     member's statistic, threshold [-] and validity per sample.
 
     Parameters

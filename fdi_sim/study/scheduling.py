@@ -60,7 +60,8 @@ def compare(name: str = "f16_climb_accelerate", seeds: Sequence[int] = HELD_OUT_
     from fdi_sim.detectors.scheduled import GustKalmanSchedule
     from fdi_sim.flightlog import read_log
     from fdi_sim.training import fly
-    from fdi_sim.bank.runtime import _decide, DecisionConfig
+    from fdi_sim.bank.kernels import decide
+    from fdi_sim.bank.runtime import DecisionConfig
     from fdi_sim.training.schedule import design_schedule, schedule_points
 
     sc = load(shipped_dir() / f"{name}.toml")
@@ -91,7 +92,7 @@ def compare(name: str = "f16_climb_accelerate", seeds: Sequence[int] = HELD_OUT_
                 st.process(u, y, s.valid, T, thr, val, hyp, cos, pt, np.empty((N, p)), np.empty((N, p)))
                 val[: int(5.0 * s.rate_hz)] = False  # armed after 5 s, as the bank
                 ex, al, iso = np.empty(N, np.bool_), np.empty(N, np.bool_), np.empty(N, np.int64)
-                _decide(T, thr, val, hyp, dec.k, False, np.zeros(dec.n, np.int64),
+                decide(T, thr, val, hyp, dec.k, False, np.zeros(dec.n, np.int64),
                         np.array([0, 0, 0, -1, 0, 0], np.int64), np.zeros(len(st.hypotheses), np.int64), ex, al, iso,
                         np.empty(N, np.int64))
                 counts[key][0] += int(np.count_nonzero(al[1:] & ~al[:-1]) + al[0])

@@ -80,10 +80,10 @@ def test_confident_threshold_covers_correlated_flights():
 
 def test_persistence_series_exceeds_exactly_where_the_bank_alarms():
     """k-of-n: the series from :func:`persistence_series` is above a threshold exactly at the
-    samples where the bank's own decision kernel (``fdi_sim.bank.runtime._decide``) has its alarm on,
+    samples where the bank's own decision kernel (``fdi_sim.bank.kernels.decide``) has its alarm on,
     with invalid samples and a ring that starts empty."""
     from fdi_sim.decision.tail import persistence_series
-    from fdi_sim.bank.runtime import _decide
+    from fdi_sim.bank.kernels import decide
 
     rng = np.random.default_rng(4)
     for k, n in [(1, 1), (3, 5), (2, 2), (4, 7)]:
@@ -94,7 +94,7 @@ def test_persistence_series_exceeds_exactly_where_the_bank_alarms():
             N = stat.size
             exceed, alarm = np.zeros(N, np.bool_), np.zeros(N, np.bool_)
             iso, lead = np.zeros(N, np.int64), np.zeros(N, np.int64)
-            _decide(stat, np.full(N, thr), valid, np.full(N, -1, np.int64), k, False, np.zeros(n, np.int64),
+            decide(stat, np.full(N, thr), valid, np.full(N, -1, np.int64), k, False, np.zeros(n, np.int64),
                     np.array([0, 0, 0, -1, 0, 0], np.int64), np.zeros(1, np.int64), exceed, alarm, iso, lead)
             assert np.array_equal(m > thr, alarm), (k, n, thr)
 

@@ -161,7 +161,7 @@ def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
     from scipy.stats import chi2
 
     from fdi_sim.decision.persistence import persistence_false_alarm
-    from fdi_sim.bank.runtime import _decide
+    from fdi_sim.bank.kernels import decide
 
     rng = np.random.default_rng(8)
     N, k, n, p = 400_000, 2, 5, 0.05
@@ -177,7 +177,7 @@ def test_bank_persistence_on_white_noise_matches_its_binomial_rate():
         i = 0
         for b in blocks:
             sl = slice(i, min(N, i + int(b)))
-            _decide(stat[sl], thr[sl], valid[sl], hyp[sl], k, False, ring, st, votes, ex[sl], al[sl], iso[sl],
+            decide(stat[sl], thr[sl], valid[sl], hyp[sl], k, False, ring, st, votes, ex[sl], al[sl], iso[sl],
                     lead[sl])
             i += int(b)
         return ex, al, iso

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from fdi_sim.errors import StudyError
-from fdi_sim.bank.runtime import _decide
+from fdi_sim.bank.kernels import decide
 from fdi_sim.study import rescore as R
 from fdi_sim.study.stats import BANK, summarize
 
@@ -33,7 +33,7 @@ def study(flown):
 
 # --- the rule, on constructed arrays ---------------------------------------------------------------
 def loop_rule(stat, thr, valid, k, n):
-    """_decide's persistence rule written out: a ring of the last n exceedances, alarm at >= k."""
+    """decide's persistence rule written out: a ring of the last n exceedances, alarm at >= k."""
     ring, pos, count, out = [0] * n, 0, 0, []
     for s, t, v in zip(stat, thr, valid):
         e = 1 if (v and s > t) else 0
@@ -45,7 +45,7 @@ def loop_rule(stat, thr, valid, k, n):
 
 
 def bank_rule(stat, thr, valid, k, n, rng):
-    """The compiled _decide itself, fed in random blocks (its ring carried across them)."""
+    """The compiled decide itself, fed in random blocks (its ring carried across them)."""
     N = len(stat)
     ring, st = np.zeros(n, np.int64), np.array([0, 0, 0, -1, 0, 0], np.int64)
     votes = np.zeros(3, np.int64)
@@ -55,7 +55,7 @@ def bank_rule(stat, thr, valid, k, n, rng):
         b = min(N - j, int(rng.integers(1, 12)))
         ex, al = np.zeros(b, bool), np.zeros(b, bool)
         iso, lead = np.zeros(b, np.int64), np.zeros(b, np.int64)
-        _decide(stat[j:j + b], thr[j:j + b], valid[j:j + b], np.zeros(b, np.int64), k, False, ring, st, votes,
+        decide(stat[j:j + b], thr[j:j + b], valid[j:j + b], np.zeros(b, np.int64), k, False, ring, st, votes,
                 ex, al, iso, lead)
         alarm[j:j + b] = al
         j += b
