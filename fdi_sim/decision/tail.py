@@ -324,7 +324,10 @@ def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float, hours: fl
                                 f"(split {split:.2f})"), 1.0, False
     fits = {}
     for pw in ((1.0, 2.0) if u > 0.0 else (1.0,)) if power is None else (power,):
-        z = peaks ** pw - u ** pw
+        with np.errstate(over="ignore"):
+            z = peaks ** pw - u ** pw
+        if pw != 1.0 and not np.isfinite(z).all():  # peaks past 1e154 (a diverging statistic): x^2 overflows
+            continue
         # a resample told the tail is exponential needs no fit: the same numbers at a tenth of the cost
         fits[pw] = (0.0, float(z.mean()), z) if heavy is False else genpareto.fit(z, floc=0.0)[::2] + (z,)
     pw = min(fits, key=lambda q: abs(fits[q][0]))  # the scale on which the tail is nearest exponential
