@@ -54,8 +54,12 @@ def _table(kind: str) -> dict[str, PluginSpec]:
 
 
 def register(kind: str, id: str, summary: str, factory: Callable[..., Any], params: Any = None,
-             origin: str = "fdi-sim") -> PluginSpec:
-    """Add a plugin to the catalogue; a duplicate id raises :class:`RegistryError`."""
+             origin: str | None = None) -> PluginSpec:
+    """Add a plugin to the catalogue; a duplicate id raises :class:`RegistryError`. ``origin``
+    defaults to whoever is being loaded: fdi-sim's catalogues, or the plugin being imported."""
+    origin = origin if origin is not None else _ORIGIN
+    if origin == "fdi-sim" and _ORIGIN != "fdi-sim":  # a plugin's module cannot claim to be a built-in
+        origin = _ORIGIN
     table = _table(kind)
     if not _valid_id(id):
         raise RegistryError(f"plugin id {id!r} must look like 'name-v1' (lower case, versioned)")
@@ -155,30 +159,59 @@ def load_entry_point_plugins() -> None:
     """Register every installed entry-point plugin (:data:`ENTRY_POINT_GROUPS`), after the built-ins.
 
     A plugin that cannot be used (an id that is not ``name-vN``, an id already taken, an import
-    that fails, a factory that is not callable) is not registered; it is kept with its reason
-    (:func:`broken_plugins`), so one broken package never stops the others or fdi-sim itself, and
-    asking for it says why.
+    that fails or exits, a factory that is not callable, a registration of its own that clashes)
+    is not registered; it is kept with its reason (:func:`broken_plugins`), so one broken package
+    never stops the others or fdi-sim itself, and asking for it says why. Whatever a plugin's
+    module registers while it is imported is recorded with the plugin's origin, never as a
+    built-in (a built-in skips the contract check a plugin gets before it flies).
     """
+    global _ORIGIN
     from importlib.metadata import entry_points
 
     for kind, group in ENTRY_POINT_GROUPS.items():
-        for ep in sorted(entry_points(group=group), key=lambda e: e.name):
-            origin = f"{ep.dist.name} {ep.dist.version}" if getattr(ep, "dist", None) else ep.value
+        try:
+            eps = sorted(entry_points(group=group), key=lambda e: e.name)
+        except Exception as exc:  # noqa: BLE001 - a malformed entry_points.txt of any installed package
+            _BROKEN[(kind, f"<{group}>")] = BrokenPlugin(kind, f"<{group}>", "the installed packages",
+                                                         f"reading the entry points failed: {type(exc).__name__}: {exc}")
+            continue
+        for ep in eps:
+            origin = _origin_of(ep)
             why = None
-            if not _valid_id(ep.name):
-                why = f"its id {ep.name!r} (the entry point's name) must look like 'name-v1' (lower case, versioned)"
-            elif ep.name in _table(kind):
-                why = f"its id {ep.name!r} is already registered by {_table(kind)[ep.name].origin}"
-            else:
-                try:
-                    factory = ep.load()
-                except Exception as exc:  # noqa: BLE001 - any import error of a foreign package is its reason
-                    why = f"importing {ep.value} failed: {type(exc).__name__}: {exc}"
+            try:
+                if not _valid_id(ep.name):
+                    why = f"its id {ep.name!r} (the entry point's name) must look like 'name-v1' (lower case, versioned)"
+                elif ep.name in _table(kind):
+                    why = f"its id {ep.name!r} is already registered by {_table(kind)[ep.name].origin}"
                 else:
+                    _ORIGIN = origin
+                    try:
+                        factory = ep.load()
+                    finally:
+                        _ORIGIN = "fdi-sim"
                     if not callable(factory):
                         why = f"{ep.value} is a {type(factory).__name__}, not a factory callable"
+                    elif ep.name in _table(kind):  # its module registered itself while imported: kept as is
+                        pass
+                    else:
+                        doc = factory.__doc__ if isinstance(getattr(factory, "__doc__", None), str) else ""
+                        lines = doc.strip().splitlines()
+                        register(kind, ep.name, lines[0].strip() if lines else f"plugin from {origin}", factory,
+                                 origin=origin)
+            except KeyboardInterrupt:
+                raise
+            except BaseException as exc:  # noqa: BLE001 - an import that raises, or calls sys.exit, is its reason
+                why = f"loading {ep.value} failed: {type(exc).__name__}: {exc}"
             if why is not None:
                 _BROKEN[(kind, ep.name)] = BrokenPlugin(kind, ep.name, origin, why)
-                continue
-            doc = (getattr(factory, "__doc__", None) or "").strip().splitlines()
-            register(kind, ep.name, doc[0].strip() if doc else f"plugin from {origin}", factory, origin=origin)
+
+
+#: the origin stamped on what ``register`` records: a plugin's while its module is being imported
+_ORIGIN = "fdi-sim"
+
+
+def _origin_of(ep: Any) -> str:
+    """``"<distribution> <version>"`` of an entry point, or its value when the metadata is incomplete."""
+    dist = getattr(ep, "dist", None)
+    name = getattr(dist, "name", None) if dist is not None else None
+    return f"{name} {getattr(dist, 'version', '')}".strip() if name else f"{ep.value}"

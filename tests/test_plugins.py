@@ -72,7 +72,7 @@ def flown(site, tmp_path_factory) -> Path:
     scn.write_text(text)
     r = _cli(site, "run", str(scn), "--log", str(out / "plugin.mcap"), "--duration", "40", "--quiet")
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:]
-    assert f"fdi bank   {PLUGIN}, kinematic-attitude-v1" in r.stdout or PLUGIN in r.stdout
+    assert f"fdi bank   {PLUGIN}, kinematic-attitude-v1" in r.stdout
     return out / "plugin.mcap"
 
 
@@ -135,8 +135,15 @@ def test_a_broken_plugin_is_refused_with_its_reason(tmp_path):
     dist = site / "bad_plugins-1.0.dist-info"
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: bad-plugins\nVersion: 1.0\n")
+    (site / "exit_plugin.py").write_text("import sys\nsys.exit('argparse said no')\n")
+    (site / "selfreg_plugin.py").write_text(
+        "from fdi_sim.registry import register\n"
+        "def make(model, **kw):\n    return None\n"
+        "make.__doc__ = 3  # not a string\n"
+        "register('detector', 'selfreg-v1', 'registers itself', make)\n")
     (dist / "entry_points.txt").write_text("[fdi_sim.detectors]\nbroken-import-v1 = bad_plugin:make\n"
-                                           "NotVersioned = ok_plugin:make\nparity-v1 = ok_plugin:make\n")
+                                           "NotVersioned = ok_plugin:make\nparity-v1 = ok_plugin:make\n"
+                                           "exits-v1 = exit_plugin:make\nselfreg-v1 = selfreg_plugin:make\n")
     r = _cli(site, "plugins")
     assert r.returncode == 0, r.stderr
     out = r.stdout
@@ -144,6 +151,10 @@ def test_a_broken_plugin_is_refused_with_its_reason(tmp_path):
     assert "broken-import-v1" in out and "ModuleNotFoundError" in out
     assert "NotVersioned" in out and "must look like 'name-v1'" in out
     assert "'parity-v1' is already registered by fdi-sim" in out
+    assert "exits-v1" in out and "SystemExit: argparse said no" in out
+    # a module that registers itself while imported is recorded with its distribution, never as a built-in
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith("selfreg-v1"))
+    assert "[plugin: bad-plugins 1.0]" in line
     scn = tmp_path / "s.toml"
     scn.write_text((ROOT / "scenarios" / "f16_cruise_doublets.toml").read_text()
                    + '\n[[detectors]]\ntype = "broken-import-v1"\n')

@@ -12,13 +12,17 @@ passes). The checks (:mod:`fdi_sim.detectors.stream`):
 ``reset``
     a second whole pass after ``reset`` gives the same bits as the first;
 ``nan``
-    NaN measurements (``ok`` False) at some samples never give a valid sample with a non-finite
-    statistic, and the detector gives valid samples again afterwards (its state was not poisoned);
+    NaN measurements (``ok`` False: every output for 3 samples, then one output alone for 3) never
+    give a valid sample with a non-finite statistic, and the detector gives valid samples again
+    before the end of the sequence (its state was not poisoned);
+
+Every pass also checks the outputs are usable by the bank (a hypothesis index in ``[-1, H)``, a
+design point >= 0, a threshold that is not NaN), and a pass that raises fails its check.
 ``python-per-sample``
     the number of Python function calls of one ``process_block`` does not grow with the block
     (8 against 64 samples): the per-sample work is compiled or vectorised.
 
-The suite runs it over every registered detector (``tests/detectors/test_contract.py``); a
+The suite runs it over every registered detector (``tests/sim/test_every_detector.py``); a
 bank refuses a plugin whose correctness checks fail, naming the check and the sample
 (:func:`fdi_sim.training.build.member_stream`).
 """
@@ -158,34 +162,55 @@ def check_stream(stream: Any, x: BlockInputs, *, checks: tuple[str, ...] = CHECK
         if fails:
             return fails  # the other checks need the attributes
     N = x.t_s.shape[0]
-    try:
-        whole = run_blocks(stream, x)
-    except Exception as exc:  # noqa: BLE001 - any failure of a foreign kernel is the finding
-        return fails + [ContractFailure("blocks", f"process_block raised {type(exc).__name__}: {exc}", 0)]
+
+    def attempt(check: str, inputs: BlockInputs, block: int | None = None) -> BlockOutputs | None:
+        """One pass; a pass that raises is that check's failure (a foreign kernel's error is the finding)."""
+        try:
+            out = run_blocks(stream, inputs, block)
+        except Exception as exc:  # noqa: BLE001
+            fails.append(ContractFailure(check, f"process_block raised {type(exc).__name__}: {exc}"))
+            return None
+        bad = _out_of_range(stream, out)
+        if bad is not None:
+            fails.append(ContractFailure(check, bad[0], bad[1]))
+            return None
+        return out
+
+    whole = attempt("blocks", x)
+    if whole is None:
+        stream.reset()
+        return fails
     if "blocks" in checks:
         for size in (1, 37):
-            d = _first_difference(whole, run_blocks(stream, x, size))
+            part = attempt("blocks", x, size)
+            d = _first_difference(whole, part) if part is not None else None
             if d:
                 fails.append(ContractFailure("blocks", f"blocks of {size} differ from one pass in {d[0]}", d[1]))
     if "reset" in checks:
-        d = _first_difference(whole, run_blocks(stream, x))
+        again = attempt("reset", x)
+        d = _first_difference(whole, again) if again is not None else None
         if d:
             fails.append(ContractFailure("reset", f"a second pass after reset differs in {d[0]}", d[1]))
     if "nan" in checks:
-        k = N // 4
+        k = N // 8
+        # every output lost for 3 samples, then one output lost alone for 3 (a single sensor's dropout)
         y, ok = x.y.copy(), x.ok.copy()
         y[k:k + 3] = np.nan
         ok[k:k + 3] = False
-        bad = run_blocks(stream, BlockInputs(x.t_s, x.u, y, ok, x.fresh))
-        wrong = bad.valid & ~np.isfinite(bad.statistic)
-        if wrong.any():
-            fails.append(ContractFailure("nan", "a valid sample with a non-finite statistic",
-                                         int(np.flatnonzero(wrong)[0])))
-        if whole.valid[N // 2 - 1] and not bad.valid[k + 3:N // 2].any():
-            fails.append(ContractFailure("nan", f"no valid sample in the {N // 2 - k - 3} samples after three NaN "
-                                         "measurements (the state was poisoned)", k + 3))
-        if bad.valid[k:k + 3].any() and not np.isfinite(bad.statistic[k:k + 3]).all():
-            fails.append(ContractFailure("nan", "NaN measurements gave a valid NaN statistic", k))
+        if y.shape[1]:
+            y[k + 10:k + 13, 0] = np.nan
+            ok[k + 10:k + 13, 0] = False
+        bad = attempt("nan", BlockInputs(x.t_s, x.u, y, ok, x.fresh))
+        if bad is not None:
+            wrong = bad.valid & ~np.isfinite(bad.statistic)
+            if wrong.any():
+                fails.append(ContractFailure("nan", "a valid sample with a non-finite statistic",
+                                             int(np.flatnonzero(wrong)[0])))
+            # a detector with a window of w samples is invalid for w after a loss: it must give valid
+            # samples again before the end of the sequence
+            if whole.valid[-1] and not bad.valid[k + 13:].any():
+                fails.append(ContractFailure("nan", f"no valid sample in the {N - k - 13} samples after the NaN "
+                                             "measurements (the state was poisoned)", k + 13))
     stream.reset()
     if "python-per-sample" in checks and N >= 64:
         c8, c64 = _count_calls(stream, x.rows(0, 8)), _count_calls(stream, x.rows(0, 64))
@@ -194,6 +219,21 @@ def check_stream(stream: Any, x: BlockInputs, *, checks: tuple[str, ...] = CHECK
                                          f"({c8} for a block of 8, {c64} for 64): the per-sample work is not compiled"))
         stream.reset()
     return fails
+
+
+def _out_of_range(stream: Any, out: BlockOutputs) -> tuple[str, int] | None:
+    """The first output the bank could not use: a hypothesis index outside [-1, H), a negative
+    design point, a threshold that is NaN (the bank indexes its votes by the hypothesis: an index
+    past the end would write outside them)."""
+    H = len(stream.hypotheses)
+    for name, bad in (("hypothesis", (out.hypothesis < -1) | (out.hypothesis >= max(H, 0))),
+                      ("point", out.point < 0), ("threshold", np.isnan(out.threshold))):
+        if name == "hypothesis" and H == 0:
+            bad = out.hypothesis != -1
+        if bad.any():
+            j = int(np.flatnonzero(bad)[0])
+            return f"{name} {getattr(out, name)[j].item()!r} is outside what the bank accepts (hypotheses: {H})", j
+    return None
 
 
 def _attributes(stream: Any) -> list[ContractFailure]:

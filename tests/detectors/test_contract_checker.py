@@ -111,3 +111,23 @@ def test_each_broken_stream_fails_its_check(cls, check):
 def test_not_a_stream_names_what_is_missing():
     fails = check_stream(NotAStream(), _x(Toy()))
     assert [f.check for f in fails] == ["attributes"] and "process_block" in fails[0].detail
+
+
+class BadIndex(Toy):
+    def process_block(self, t_s, u, y, ok, fresh, out):
+        super().process_block(t_s, u, y, ok, fresh, out)
+        out.hypothesis[:] = 7  # past its one hypothesis: the bank's votes would be written out of bounds
+
+
+class RaisesOnNan(Toy):
+    def process_block(self, t_s, u, y, ok, fresh, out):
+        if not ok.all():
+            raise ValueError("NaN in y")
+        super().process_block(t_s, u, y, ok, fresh, out)
+
+
+def test_outputs_the_bank_cannot_use_and_exceptions_are_failures_not_crashes():
+    fails = check_stream(BadIndex(), _x(BadIndex()))
+    assert any(f.check == "blocks" and "hypothesis 7" in f.detail and f.sample == 0 for f in fails), fails
+    fails = check_stream(RaisesOnNan(), _x(RaisesOnNan()))
+    assert [f.check for f in fails] == ["nan"] and "ValueError: NaN in y" in fails[0].detail
