@@ -35,7 +35,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
     from fdi_sim.bank.members import bank_members
 
-    bank_members(sc)  # a detector that cannot run in the loop is refused before anything flies
+    bank_members(sc)  # an unknown or duplicate detector id is refused before anything flies
     res = fly(sc, args.out, log_path=args.log, progress=None if not args.quiet else False, force=args.force)
     print(res.summary.format())
     print(f"log        {res.log_path}")

@@ -94,6 +94,15 @@ def test_the_plugin_flies_in_the_loop_and_replays_bit_for_bit(site, flown):
     assert f"identical to the log's /fdi/{PLUGIN}/statistic" in r.stdout
 
 
+def test_a_plugin_option_its_factory_refuses_is_bad_input(site, tmp_path):
+    scn = tmp_path / "s.toml"
+    scn.write_text((ROOT / "scenarios" / "f16_cruise_doublets.toml").read_text()
+                   + f'\n[[detectors]]\ntype = "{PLUGIN}"\nsignal = "q_rad_s"\n')
+    r = _cli(site, "run", str(scn), "--out", str(tmp_path), "--duration", "3", "--quiet")
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert "detectors[0]" in r.stderr and "q_rad_s" in r.stderr and "Traceback" not in r.stderr
+
+
 def test_fdi_sim_detect_runs_the_plugin_offline(site, flown):
     r = _cli(site, "detect", str(flown), "--detector", f"{PLUGIN}:signal=q_radps", "--json")
     assert r.returncode == 0, r.stderr[-3000:]

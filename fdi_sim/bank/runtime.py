@@ -6,7 +6,7 @@ the commands averaged over steps ``(j-1) n .. j n - 1`` (the interval ending at 
 hands the bank, per step, the command row of that step (:attr:`FdiBank.cmd_rows`, a ring of one
 block) and, at every sample step, the measurement row (:attr:`FdiBank.meas_rows`); every
 ``block_samples`` samples (``block_s``, 0.5 s by default) it calls :meth:`FdiBank.end_block`,
-which runs every member's compiled kernel once over the block, the decision rule, the failure log
+which runs every member's stream once over the block (:mod:`fdi_sim.detectors.stream`), the decision rule, the failure log
 and the reconfiguration, and writes the ``/fdi`` topics. A decision about sample ``j`` is therefore
 *acted on* (reconfiguration) at the end of its block, at most ``block_s`` after ``t_j``; its time
 stamp is ``t_j``. Replaying a log (:meth:`FdiBank.replay`) feeds the logged rows through the same
@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.decision.failure_log import FailureLogger
+from fdi_sim.detectors.stream import BlockOutputs, EstimatesActuators
 from fdi_sim.bank.kernels import average_commands, decide, gather_columns, statistic_rows, take_columns
 from fdi_sim.bank.topics import RECONFIG_JSON_SCHEMA, STAT_FIELDS, TOPIC_FDI_RECONFIG, msg_name
 from fdi_sim.decision.outcome import LATE_GRACE_S, fault_outcome
@@ -107,8 +108,6 @@ class _Member:
 
     def __init__(self, stream: Any, meas_names: Sequence[str], cmd_names: Sequence[str],
                  every: Mapping[str, int], S: int, decision: DecisionConfig) -> None:
-        from fdi_sim.detectors.stream import BlockOutputs
-
         self.stream, self.id = stream, str(stream.id)
         self.hypotheses = tuple(stream.hypotheses)
         names = tuple(stream.output_names)
@@ -147,6 +146,7 @@ class _Member:
         self.decision = decision
         self.angle_rule = decision.rule == "angle-magnitude"
         self.direct = bool(stream.independent)
+        self.estimates_actuators = isinstance(stream, EstimatesActuators)
         self.keep = False
         self.j_start = 0
         self.reset()
@@ -190,7 +190,8 @@ class _Member:
             out = self.out.rows(S)
         gather_columns(meas, valid, self.cols, self.excluded, self.every, row0, n, y, ok, fresh)
         take_columns(u_avg, self.in_cols, u)
-        self.j_start = int(getattr(self.stream, "samples_seen", 0))  # the block's first sample (estimators)
+        if self.estimates_actuators:  # the block's first sample, for the effectiveness estimator
+            self.j_start = int(self.stream.samples_seen)
         self.stream.process_block(t[:S] if S != t.shape[0] else t, u, y, ok, fresh, out)
         if unarmed:  # before the bank is armed the statistic is logged, never decided on
             out.valid[:unarmed] = False
@@ -249,7 +250,7 @@ class FdiBank:
         0.58, instead of the exponential tail, shape -0.02, of the armed samples).
     """
 
-    def __init__(self, streams: Sequence[tuple[str, Any]], *, cmd_names: Sequence[str], meas_names: Sequence[str],
+    def __init__(self, streams: Sequence[Any], *, cmd_names: Sequence[str], meas_names: Sequence[str],
                  sensor_rates_hz: Mapping[str, float], sim_rate_hz: float, rate_hz: float, block_samples: int = 5,
                  decision: DecisionConfig = DecisionConfig(), reconfigure: bool = False,
                  pilot_sensors: Sequence[str] = (), notes: Sequence[str] = (), arm_s: float = 5.0) -> None:
@@ -476,7 +477,7 @@ class FdiBank:
                             self._reconfigure_sensor(name, float(t[j]))
                             changed = True
                         elif (name in ACTUATOR_INPUTS and name in m.input_names and name not in self._estimators
-                              and hasattr(m.stream, "effectiveness_estimator")):
+                              and m.estimates_actuators):
                             self._start_estimator(m, name, float(t[j]))
                 m.was_on = on
         for j in range(S):

@@ -6,7 +6,7 @@ member the block's detector samples, by the time convention of :mod:`fdi_sim.det
 read at ``t_j``), and the member writes, per sample, its statistic, the threshold it is tested
 against, whether the sample is valid, the hypothesis it points at and its residual into arrays
 the bank allocated once (:class:`BlockOutputs`). The bank alone decides (k-of-n persistence on
-``valid and statistic > threshold``, :func:`fdi_sim.decision.persistence.k_of_n`), isolates (the
+``valid and statistic > threshold``, :func:`fdi_sim.decision.persistence.k_of_n_step`), isolates (the
 vote over ``hypothesis``), keeps the failure log and reconfigures; a member never sees another.
 
 Contract (checked for every registered detector by :func:`fdi_sim.detectors.check.check_stream`):
@@ -32,7 +32,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BlockOutputs", "StreamingDetector", "stream_design_key"]
+__all__ = ["BlockOutputs", "EstimatesActuators", "StreamingDetector", "stream_design_key"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,9 +115,12 @@ class StreamingDetector(Protocol):
         Columns of ``BlockOutputs.residual``.
     estimate_names : tuple of str
         Columns of ``BlockOutputs.estimate`` (measurements it can stand in for; ``()`` if none).
+        Reconfiguration relies on it: once a sensor is confirmed faulty the bank marks it not
+        ``ok`` for the first member that estimates it, which must go on estimating it from the
+        other outputs, and the pilot gets ``y - mean(y - estimate)`` (:mod:`fdi_sim.bank.runtime`).
     independent : bool
         Its isolation compares independent sensor groups (exact kinematics, no model), so one
-        confirmation of its suffices to reconfigure a sensor.
+        confirmation of its suffices to reconfigure a sensor. Declare it only if that is true.
     fault_directions : bool
         It writes ``cosine`` (the angle-magnitude rule may use it).
     """
@@ -173,6 +176,28 @@ class StreamingDetector(Protocol):
         out : BlockOutputs
             Rows ``0 .. N-1`` written.
         """
+        ...
+
+
+@runtime_checkable
+class EstimatesActuators(Protocol):
+    """An optional capability of a member: estimating an actuator's effectiveness from its own
+    residuals once the bank has confirmed a fault on that actuator (reconfiguration rescales the
+    command; :mod:`fdi_sim.bank.runtime`). ``kalman-gust-v1``'s stream has it.
+
+    ``effectiveness_estimator(actuator)`` returns an object with ``update(u, residual, point,
+    j_start)`` (the block's inputs, residuals and design points, and the index of the block's first
+    sample, ``samples_seen`` before the block), ``usable() -> bool`` and ``estimate`` (effectiveness
+    [-], its standard deviation [-], samples used).
+    """
+
+    @property
+    def samples_seen(self) -> int:
+        """Samples processed since the last reset."""
+        ...
+
+    def effectiveness_estimator(self, actuator: str) -> object:
+        """An estimator of ``actuator``'s effectiveness from this member's residuals."""
         ...
 
 

@@ -69,8 +69,8 @@ BANK = "bank"
 WRONG_DIAGNOSIS_REASON = (
     "no analytic probability of wrong diagnosis: Hagenblad, Gustafsson & Klein (seed 003) Algorithm 2, eq. 14, "
     "needs a stochastic parity space's mean fault vectors mu_bar_j; it is implemented for parity-stochastic-v1 "
-    "(fdi_sim.detectors.stochastic_parity.incorrect_diagnosis_matrix), which has no streaming kernel and is not a "
-    "bank member")
+    "(fdi_sim.detectors.stochastic_parity.incorrect_diagnosis_matrix) from its design, and a study does not "
+    "compute it for a parity-stochastic-v1 member yet")
 
 
 # --- reading records ------------------------------------------------------------------------------

@@ -329,7 +329,7 @@ def superimpose(log: str | Path | FlightLog, faults: Sequence[Mapping[str, Any]]
         valid = np.column_stack([np.asarray(vt[n][:K]) > 0.5 if n in vt.fields else np.ones(K, bool)
                                  for n in meas_names])
 
-    # --- the bank over the faulty rows and the logged commands (as bank_design.replay_log does)
+    # --- the bank over the faulty rows and the logged commands (as fdi_sim.training.build.replay_log does)
     b = bank_for_log(lg, bank=None if bank == "scenario" else bank, progress=progress)
     if reconfigure is not None:
         b.reconfigure = bool(reconfigure)

@@ -47,7 +47,7 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
     Raises
     ------
     ScenarioError
-        A detector that cannot run in the loop.
+        An unknown detector id, or a plugin that fails its contract check.
     DesignError
         A detector that cannot be designed (``on_design_failure = "refuse"``; with ``"skip"`` it is
         left out and the bank's notes say why), with where and why.
@@ -195,16 +195,17 @@ def _model_stream(ctx: MemberContext, m: MemberSpec, *, design_model: Any = None
                              model if design_model is None else design_model)
     except DesignError as exc:
         raise DesignError(f"{sc.source}: {m.id} cannot be designed at the initial point ({where}): {exc}") from None
+    except (TypeError, ValueError) as exc:  # a plugin factory's own refusal of its options: bad input
+        if registry.get("detector", m.id).origin == "fdi-sim":
+            raise
+        raise ScenarioError(sc.source, m.source, f"plugin detector {m.id} refused its options: "
+                            f"{type(exc).__name__}: {exc}", "fix the [[detectors]] entry's options") from None
     if isinstance(det, StreamingDetector):
         stream, how = det, "its own stream"
     else:
-        stream = None
-        try:
-            from fdi_sim.detectors.seed_streams import compiled_stream
-        except ImportError:  # pragma: no cover - a partial install
-            compiled_stream = None
-        if compiled_stream is not None:
-            stream = compiled_stream(det, model, ctx.cmd_names, m.id)
+        from fdi_sim.detectors.seed_streams import compiled_stream
+
+        stream = compiled_stream(det, model, ctx.cmd_names, m.id)
         how = "compiled stream"
         if stream is None:
             stream, how = StepStream(det, model, ctx.cmd_names, params, id=m.id), "per-sample step (Python)"
