@@ -56,7 +56,7 @@ def scenario(ac: str, T: float, bank: str, per_step: bool, block_s: float = 0.5,
     text = SC.format(ac=ac, T=T, h=h, speed=speed, bank="none" if bank == "every" else bank,
                      per_step=str(per_step).lower(), block_s=block_s, resid=str(residuals).lower())
     if bank == "every":
-        text = text.replace("[fdi]\n", "[fdi]\ncalibration_flights = 4\ncalibration_duration_s = 60.0\n"
+        text = text.replace("[fdi]\n", "[fdi]\ncalibration_flights = 4\ncalibration_duration_s = 60.0\non_design_failure = \"skip\"\n"
                             'thresholds = "trained"\n')
         text += "".join(f'\n[[detectors]]\ntype = "{i}"\n' for i in registry.ids("detector"))
     return loads(text)

@@ -27,8 +27,12 @@ from check_study_logs import SCENARIOS, study_text
 from fdi_sim import scenario
 from fdi_sim.aircraft import Aircraft, Atmosphere, trim
 from fdi_sim.aircraft.properties import truth_signals
-from fdi_sim.training import fly
 from fdi_sim.sim.run import build_pilot, build_sensors
+
+try:
+    from fdi_sim.training import fly
+except ImportError:  # a tree from before fdi_sim.training (bench_ab.py times an older commit's tree)
+    from fdi_sim.sim import run as fly
 
 N_CALLS = 20000
 

@@ -26,7 +26,10 @@ import numpy as np
 
 from fdi_sim import scenario
 from fdi_sim.flightlog import read_log
-from fdi_sim.training import fly
+try:
+    from fdi_sim.training import fly
+except ImportError:  # a tree from before fdi_sim.training (its loop designed its own bank)
+    from fdi_sim.sim import run as fly
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 

@@ -22,7 +22,10 @@ from pathlib import Path
 from check_identical_logs import SCENARIOS, compare, fingerprint
 
 from fdi_sim import scenario
-from fdi_sim import training
+try:
+    from fdi_sim.training import fly as fly_scenario
+except ImportError:  # a tree from before fdi_sim.training (bench_ab.py times an older commit's tree)
+    from fdi_sim.sim import run as fly_scenario
 
 #: fault-free and faulty, both aircraft, with and without dropouts (the loop's two paths)
 DEFAULT = ("f16_cruise_doublets", "dhc6_cruise_doublets", "f16_pitch_gyro_bias", "dhc6_intermittent_aoa",
@@ -50,7 +53,7 @@ def fly(names: tuple[str, ...]) -> dict[str, dict]:
             path = SCENARIOS / f"{name}.toml"
             sc = scenario.loads(study_text(path), source=str(path))
             t0 = time.perf_counter()
-            res = training.fly(sc, d, progress=False)
+            res = fly_scenario(sc, d, progress=False)
             out[name] = {"status": res.status, "steps": res.summary.steps, **fingerprint(res.log_path)}
             print(f"{name:30} {res.status:10} {res.summary.steps:6d} steps  loop {res.summary.wall_s:5.2f} s  "
                   f"all {time.perf_counter() - t0:5.1f} s", flush=True)
