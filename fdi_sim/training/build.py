@@ -22,7 +22,7 @@ from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import per_sample_target
 from fdi_sim.training.flights import LazyTraining, design_scenario
 from fdi_sim.training.thresholds import (
-    _replay_log, apply_study_thresholds, calibrate_thresholds, note_no_match, thresholds_source,
+    MemberThresholdError, _replay_log, apply_study_thresholds, calibrate_thresholds, note_no_match, thresholds_source,
 )
 from fdi_sim.scenario.loader import from_dict
 from fdi_sim.threads import single_blas_thread
@@ -83,10 +83,26 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
                                 "fault directions only ([[detectors]] without bank = \"default\")")
     S = int(round(f.block_s * f.rate_hz))
     decision = DecisionConfig(f.persistence_k, f.persistence_n, max(1, int(round(f.confirm_s * f.rate_hz))), f.decision)
-    bank = FdiBank(streams, cmd_names=cmd_names, meas_names=meas_names, sensor_rates_hz=sensor_rates_hz,
-                   sim_rate_hz=float(sc.model.rate_hz), rate_hz=f.rate_hz, block_samples=S, decision=decision,
-                   reconfigure=f.reconfigure, pilot_sensors=pilot_sensors, notes=tuple(notes), arm_s=f.arm_s)
-    p = per_sample_target(f.far_per_h, len(streams), f.rate_hz)
+    while True:  # once, or again without a member whose threshold cannot be set (on_design_failure = "skip")
+        bank = FdiBank(streams, cmd_names=cmd_names, meas_names=meas_names, sensor_rates_hz=sensor_rates_hz,
+                       sim_rate_hz=float(sc.model.rate_hz), rate_hz=f.rate_hz, block_samples=S, decision=decision,
+                       reconfigure=f.reconfigure, pilot_sensors=pilot_sensors, notes=tuple(notes), arm_s=f.arm_s)
+        try:
+            _set_thresholds(sc, bank, logs, progress)
+            return bank
+        except MemberThresholdError as exc:
+            if f.on_design_failure != "skip" or len(streams) == 1:
+                raise
+            streams = [st for st in streams if st.id != exc.member]
+            notes = [n if not n.startswith(f"{exc.member}:") else f"{exc.member}: skipped, no threshold ({exc})"
+                     for n in notes]
+
+
+def _set_thresholds(sc: Scenario, bank: Any, logs: Any, progress: bool) -> None:
+    """Every member's threshold: from the scenario's thresholds file where it covers the bank,
+    else trained on the fault-free flights (:mod:`fdi_sim.training.thresholds`)."""
+    f = sc.model.fdi
+    p = per_sample_target(f.far_per_h, len(bank.members), f.rate_hz)
     path, explicit = thresholds_source(sc)
     if path is not None:
         trained: list[bool] = []
@@ -102,7 +118,6 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
             bank.calibration = {**bank.calibration, "source": "trained", "note": note_no_match(sc, path)}
     else:
         calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
-    return bank
 
 
 @dataclass
@@ -187,7 +202,7 @@ def _model_stream(ctx: MemberContext, m: MemberSpec, *, design_model: Any = None
     from fdi_sim.detectors.spec import build_detector, DetectorSpec
 
     sc = ctx.sc
-    params = {k: v for k, v in m.params.items() if k not in ENTRY_KEYS}
+    params = {k: v for k, v in m.params.items() if k != "type"}  # n_flights, ...: kalman-gust-v1's, refused here
     model = ctx.model()
     where = f"h {sc.model.initial.h_ft:g} ft"
     try:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -192,6 +193,14 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
+class MemberThresholdError(DesignError):
+    """One member's threshold cannot be set on the training flights (``member`` names it)."""
+
+    def __init__(self, member: str, message: str) -> None:
+        super().__init__(message)
+        self.member = member
+
+
 def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Sequence[Any] | None = None,
                          progress: bool = True, use_cache: bool = True) -> dict[str, Any]:
     """Set each member's threshold from its statistic on the fault-free training flights (the same
@@ -241,7 +250,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                 s = [x[np.isfinite(x)] for x in s]
                 x = np.concatenate(s)
                 if x.size < 2:
-                    raise DesignError(f"{sc.source}: {mem.id} gave {x.size} valid statistic samples on its "
+                    raise MemberThresholdError(mem.id, f"{sc.source}: {mem.id} gave {x.size} valid statistic samples on its "
                                       f"{len(logs)} fault-free training flights (armed from {f.arm_s:g} s): no "
                                       "threshold can be set; its design does not settle on this aircraft")
                 if episodes:
@@ -253,6 +262,10 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                         method = f"per-sample ({e}): {method}"
                 else:
                     thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
+                if not math.isfinite(thr):  # a statistic that diverges on fault-free flights has no level
+                    raise MemberThresholdError(mem.id, f"{sc.source}: {mem.id} has no finite threshold on its "
+                                               f"{len(logs)} fault-free training flights ({method}; statistic up "
+                                               f"to {float(x.max()):.3g}): it diverges on this aircraft here")
                 rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
                                        "max_training": float(x.max()) if x.size else None})
             write_entry(path, rec, use_cache)
