@@ -68,10 +68,11 @@ def trial(tree: Path, name: str, T: float) -> tuple[float, float]:
     return b, lp
 
 
-def main(base: str, trials: int = 4, T: float = 300.0) -> None:
+def main(base: str, trials: int = 4, T: float = 300.0,
+         names: tuple[str, ...] = ("f16_cruise_doublets", "dhc6_cruise_doublets")) -> None:
     trees = {"base": Path(base).resolve(), "new": NEW}
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} (2 cores)")
-    for name in ("f16_cruise_doublets", "dhc6_cruise_doublets"):
+    for name in names:
         res: dict[str, list[tuple[float, float]]] = {k: [] for k in trees}
         for _ in range(trials):
             for label, tree in trees.items():
@@ -85,4 +86,5 @@ def main(base: str, trials: int = 4, T: float = 300.0) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], *(int(sys.argv[2]),) if len(sys.argv) > 2 else (), *(float(sys.argv[3]),) if len(sys.argv) > 3 else ())
+    main(sys.argv[1], *(int(sys.argv[2]),) if len(sys.argv) > 2 else (), *(float(sys.argv[3]),) if len(sys.argv) > 3 else (),
+         *(tuple(sys.argv[4].split(",")),) if len(sys.argv) > 4 else ())
