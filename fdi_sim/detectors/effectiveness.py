@@ -106,13 +106,16 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.detectors.gust_kalman_stream import GustKalmanStream
 from fdi_sim.errors import DesignError
+
+if TYPE_CHECKING:  # the stream builds its estimator (GustKalmanStream.effectiveness_estimator): an annotation only
+    from fdi_sim.detectors.gust_kalman_stream import GustKalmanStream
 
 #: length of a batch of the sandwich covariance [s]
 DEFAULT_BATCH_S = 2.0

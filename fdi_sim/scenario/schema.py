@@ -75,7 +75,7 @@ class LimitsSection(_Section):
 
 class FdiDesignSection(_Section):
     """The conditions the bank is designed and calibrated for, when not the flight's own
-    (``fdi_sim.training.build.design_scenario``): a Monte Carlo study designs its bank once per
+    (``fdi_sim.training.schedule.design_scenario``): a Monte Carlo study designs its bank once per
     schedule-grid node at nominal conditions and flies it in the sampled ones."""
 
     point: Literal["flight", "grid"] = Field(

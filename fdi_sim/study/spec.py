@@ -362,8 +362,8 @@ def _drop_none(x: Any) -> Any:
 
 def design_key(sc: Scenario) -> str:
     """What a run's bank is designed and calibrated on, as a hash: runs with one key share a bank
-    (:func:`fdi_sim.training.build.design_scenario`, without the run's seed, name and duration)."""
-    from fdi_sim.training.build import design_scenario
+    (:func:`fdi_sim.training.schedule.design_scenario`, without the run's seed, name and duration)."""
+    from fdi_sim.training.schedule import design_scenario
     from fdi_sim.training.flights import fault_free
 
     ff = json.loads(fault_free(design_scenario(sc), 0, 1.0).to_json())

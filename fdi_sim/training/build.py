@@ -20,7 +20,8 @@ from fdi_sim import registry
 from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import per_sample_target
-from fdi_sim.training.flights import LazyTraining, design_scenario
+from fdi_sim.training.flights import LazyTraining
+from fdi_sim.training.schedule import design_scenario
 from fdi_sim.training.thresholds import (
     MemberThresholdError, _replay_log, apply_study_thresholds, calibrate_thresholds, note_no_match, thresholds_source,
 )

@@ -94,7 +94,6 @@ def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress
     return logs
 
 
-
 class LazyTraining:
     """The scenario's fault-free training flights, flown on first use (then kept)."""
 
@@ -115,47 +114,4 @@ class LazyTraining:
                                       progress=self.progress)
         return iter(self._logs)
 
-
-def design_scenario(sc: Scenario) -> Scenario:
-    """The scenario the bank is designed and calibrated on: ``sc`` itself unless ``[fdi.design]``
-    moves the point to the schedule grid's nearest node or sets the training flights' turbulence,
-    wind or sensor noise.
-
-    The grid is the aircraft's (:data:`fdi_sim.training.schedule.DEFAULT_SPACING`): nodes at whole
-    multiples of the spacing in altitude [ft] and calibrated airspeed [kt], so runs of a study
-    that sample the point continuously share one design per node (the gain scheduling of a real
-    bank), and each node is designed and calibrated once (cached).
-    """
-    from fdi_sim.training.schedule import default_spacing, initial_vc_kts
-
-    d = sc.model.fdi.design
-    if d.point == "flight" and all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale)):
-        return sc
-    data = json.loads(sc.to_json())
-    what = []
-    if d.point == "grid":
-        dh, dv = default_spacing(sc.aircraft)
-        h = max(dh, round(sc.model.initial.h_ft / dh) * dh)
-        vc = max(dv, round(initial_vc_kts(sc) / dv) * dv)
-        data["initial"] = {**data["initial"], "h_ft": h, "vc_kts": vc, "vt_kts": None}
-        what.append(f"grid node h {h:g} ft, vc {vc:g} kt")
-    atm = dict(data.get("atmosphere", {}))
-    if d.turbulence is not None:
-        atm["turbulence"] = d.turbulence
-        what.append(f"{d.turbulence} turbulence")
-    if d.wind_speed_kts is not None:
-        atm["wind_speed_kts"] = d.wind_speed_kts
-        what.append(f"wind {d.wind_speed_kts:g} kt")
-    if d.wind_from_deg is not None:
-        atm["wind_from_deg"] = d.wind_from_deg
-    if float(atm.get("wind_speed_kts", 0.0)) == 0.0:
-        atm["wind_from_deg"] = 0.0  # no wind has no direction: one design, whatever the flight's
-    data["atmosphere"] = atm
-    if d.noise_scale is not None:
-        data["sensors"] = {**data.get("sensors", {}), "noise_scale": d.noise_scale}
-        what.append(f"noise scale {d.noise_scale:g}")
-    # the design conditions are the design; a flight-specific name, seed or duration is not
-    data["fdi"] = {**data["fdi"], "design": {}}
-    data.update(name=f"{sc.aircraft}_design", description="", seed=0, faults=[])
-    return from_dict(data, source=f"{sc.source} (bank design at {', '.join(what)})")
 

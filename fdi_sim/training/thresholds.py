@@ -24,7 +24,7 @@ from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import design_hash
 from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
-from fdi_sim.training.flights import design_scenario
+from fdi_sim.training.schedule import design_scenario
 from fdi_sim.units import S_PER_H
 
 
