@@ -73,7 +73,7 @@ class BlockInputs:
         return BlockInputs(self.t_s[a:b], self.u[a:b], self.y[a:b], self.ok[a:b], self.fresh[a:b])
 
 
-def contract_inputs(stream: Any, model: Any = None, n_samples: int = 160, rate_hz: float = 20.0,
+def contract_inputs(stream: Any, model: Any = None, n_samples: int = 400, rate_hz: float = 20.0,
                     rng: np.random.Generator | None = None) -> BlockInputs:
     """Samples for the checks: trim values (``model.u0``, ``model.y0`` where the model has the
     signal, else 1) plus white noise of 1 % of each value's size (at least 1e-3), and a step of
@@ -207,7 +207,8 @@ def check_stream(stream: Any, x: BlockInputs, *, checks: tuple[str, ...] = CHECK
                 fails.append(ContractFailure("nan", "a valid sample with a non-finite statistic",
                                              int(np.flatnonzero(wrong)[0])))
             # a detector with a window of w samples is invalid for w after a loss: it must give valid
-            # samples again before the end of the sequence
+            # samples again before the end of the sequence (337 samples after the loss by default: the
+            # kinematic attitude check warms up for 5 s and fills a 2 s window, 140 samples at 20 Hz)
             if whole.valid[-1] and not bad.valid[k + 13:].any():
                 fails.append(ContractFailure("nan", f"no valid sample in the {N - k - 13} samples after the NaN "
                                              "measurements (the state was poisoned)", k + 13))

@@ -3,7 +3,7 @@ each aircraft in moderate turbulence, its replay (``fdi-sim detect --bank scenar
 log bit for bit, and its stream passes the contract checker (``fdi_sim.detectors.check``).
 
 The bank is every registered detector at once (15 on both aircraft), with thresholds trained on
-four 60 s fault-free flights (the shipped files cover the default bank only): the point here is
+three 60 s fault-free flights (the shipped files cover the default bank only): the point here is
 that each member flies and replays exactly, not how well it detects (``docs/detectors.md``).
 """
 from __future__ import annotations
@@ -36,7 +36,7 @@ def every_detector_scenario(aircraft: str):
     d["atmosphere"]["turbulence"] = "moderate"
     d["duration_s"] = 40.0
     d["detectors"] = [{"type": i} for i in registry.ids("detector")]
-    d["fdi"] = {**d.get("fdi", {}), "bank": "none", "calibration_flights": 4, "calibration_duration_s": 60.0,
+    d["fdi"] = {**d.get("fdi", {}), "bank": "none", "calibration_flights": 3, "calibration_duration_s": 60.0,
                 "thresholds": "trained"}
     return from_dict(d, source=f"{SCENARIOS[aircraft]} (every registered detector, moderate turbulence)")
 
