@@ -126,3 +126,66 @@ def test_a_member_that_cannot_be_designed_is_refused_or_skipped(tmp_path, on_fai
     assert [m["id"] for m in json.loads(fdi["members"])] == ["kinematic-attitude-v1"]
     (note,) = [n for n in json.loads(fdi["notes"]) if n.startswith("kalman-mmae-v1")]
     assert "skipped" in note and "effectiveness must be in [0, 1)" in note
+
+
+class _NeverValid:
+    """A member whose statistic is never valid: no threshold can be set on any training flight."""
+
+    hypotheses: tuple[str, ...] = ()
+    input_names: tuple[str, ...] = ()
+    output_names = ("q_radps",)
+    residual_names = ("e",)
+    estimate_names: tuple[str, ...] = ()
+    independent = False
+    fault_directions = False
+
+    def __init__(self) -> None:
+        self.id, self._thr = "never-valid-v1", 1.0
+
+    @property
+    def threshold(self) -> float:
+        return self._thr
+
+    def set_threshold(self, value: float) -> None:
+        self._thr = float(value)
+
+    def reset(self) -> None:
+        pass
+
+    def start_at(self, h_ft: float, vc_kts: float) -> None:
+        pass
+
+    def design_key(self) -> bytes:
+        return b"never-valid"
+
+    def process_block(self, t_s, u, y, ok, fresh, out) -> None:
+        out.statistic[:] = 0.0
+        out.valid[:] = False
+        out.threshold[:] = self._thr
+        out.hypothesis[:] = -1
+        out.residual[:] = 0.0
+
+
+@pytest.mark.parametrize("on_failure", ["refuse", "skip"])
+def test_a_member_without_a_threshold_is_refused_or_skipped(tmp_path, monkeypatch, on_failure):
+    from fdi_sim.errors import DesignError
+    from fdi_sim.training import fly
+
+    registry.load_builtin_plugins()
+    monkeypatch.setattr(registry, "_REGISTRY", {k: dict(v) for k, v in registry._REGISTRY.items()})
+    registry.register("detector", "never-valid-v1", "never valid (test)", lambda model=None, **kw: _NeverValid())
+    text = (ROOT / "scenarios" / "f16_cruise_doublets.toml").read_text()
+    text += (f'\n[fdi]\ncalibration_flights = 3\ncalibration_duration_s = 60.0\non_design_failure = "{on_failure}"\n'
+             '[[detectors]]\ntype = "never-valid-v1"\n[[detectors]]\ntype = "kinematic-attitude-v1"\n')
+    from fdi_sim.scenario import loads
+
+    sc = loads(text, str(tmp_path / "s.toml"))
+    if on_failure == "refuse":
+        with pytest.raises(DesignError, match="never-valid-v1 gave 0 valid statistic samples"):
+            fly(sc, tmp_path, progress=False)
+        return
+    res = fly(sc, tmp_path, progress=False)
+    fdi = read_log(res.log_path).metadata["fdi"]
+    assert [m["id"] for m in json.loads(fdi["members"])] == ["kinematic-attitude-v1"]
+    (note,) = [n for n in json.loads(fdi["notes"]) if n.startswith("never-valid-v1")]
+    assert "skipped, no threshold" in note
