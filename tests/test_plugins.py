@@ -176,7 +176,6 @@ def test_a_plugin_that_fails_its_contract_is_refused_before_it_flies(tmp_path):
     site.mkdir()
     (site / "leaky_plugin.py").write_text('''
 import numpy as np
-from fdi_sim.detectors.step_stream import model_columns
 
 
 class Leaky:

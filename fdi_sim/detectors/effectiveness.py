@@ -106,16 +106,13 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.errors import DesignError
-
-if TYPE_CHECKING:  # the stream builds its estimator (GustKalmanStream.effectiveness_estimator): an annotation only
-    from fdi_sim.detectors.gust_kalman_stream import GustKalmanStream
 
 #: length of a batch of the sandwich covariance [s]
 DEFAULT_BATCH_S = 2.0
@@ -444,7 +441,7 @@ class EffectivenessEstimator:
         non-positive time.
     """
 
-    def __init__(self, stream: GustKalmanStream, input_name: str, *, weights: str = "conservative",
+    def __init__(self, stream: Any, input_name: str, *, weights: str = "conservative",
                  settle_s: float | None = DEFAULT_SETTLE_S, batch_s: float = DEFAULT_BATCH_S,
                  nuisance_dim: int = DEFAULT_NUISANCE_DIM) -> None:
         names = tuple(stream.input_names)

@@ -56,7 +56,7 @@ from fdi_sim.detectors.kalman import KalmanInnovationDetector
 from fdi_sim.detectors.lmi_filter import LmiDetectionFilter
 from fdi_sim.detectors.samples import is_wrapped
 from fdi_sim.detectors.stream import BlockOutputs
-from fdi_sim.detectors.window_stream import command_columns, hash_arrays
+from fdi_sim.detectors.stream import command_columns, hash_arrays
 from fdi_sim.errors import DesignError
 
 __all__ = ["ObserverStream", "observer_stream"]

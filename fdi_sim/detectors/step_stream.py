@@ -5,10 +5,11 @@ Where a detector's runtime has a compiled block kernel (:mod:`fdi_sim.detectors.
 the parity window, the directional observers and the steady Kalman filter; the gust filter; the
 kinematic checks) the bank uses it. The rest (the adaptive observer, the time-varying Kalman
 filter, the multiple-model bank, and a plugin that only offers ``step``) run through
-:class:`StepStream`, which calls ``step`` once per sample in Python: the same numbers as
-``fdi-sim detect`` gives offline (:func:`fdi_sim.offline.detect.run_detector` feeds the same absolute
-values), at Python's cost, about 20-200 us a sample instead of under 1 us. It is the one member
-kind that fails the contract's "no Python work per sample" check, and the checker says so.
+:class:`StepStream`, which calls ``step`` once per sample in Python, at Python's cost. On valid
+samples its numbers are those ``fdi-sim detect`` gives offline
+(:func:`fdi_sim.offline.detect.run_detector` feeds the same absolute values); on invalid ones they
+differ (offline feeds the NaN in, here the sample is skipped). It is the one member kind that fails
+the contract's "no Python work per sample" check, and the checker says so.
 
 Inputs as in :func:`fdi_sim.offline.detect.run_detector`: the model's inputs that the loop logs come
 from ``u``; the others (the gust inputs) are held at trim; each output's deviation from trim is
@@ -19,7 +20,6 @@ state skips it.
 """
 from __future__ import annotations
 
-import hashlib
 import math
 from typing import Any, Mapping, Sequence
 
@@ -27,27 +27,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.detectors.samples import is_wrapped
-from fdi_sim.detectors.stream import BlockOutputs
+from fdi_sim.detectors.stream import BlockOutputs, command_columns, hash_arrays
 
-__all__ = ["StepStream", "model_design_key", "model_columns"]
+__all__ = ["StepStream"]
 
 _TWO_PI = 2.0 * math.pi
-
-
-def model_columns(model: Any, command_names: Sequence[str]) -> tuple[tuple[str, ...], NDArray[np.intp]]:
-    """The model inputs that are logged commands (in model order) and their model columns."""
-    names = tuple(nm for nm in model.input_names if nm in tuple(command_names))
-    return names, np.array([list(model.input_names).index(nm) for nm in names], dtype=np.intp)
-
-
-def model_design_key(ident: str, model: Any, params: Mapping[str, Any]) -> bytes:
-    """sha256 over a detector's id, design options and the linear model it is designed from."""
-    h = hashlib.sha256(ident.encode())
-    h.update(repr(sorted((str(k), repr(v)) for k, v in dict(params).items())).encode())
-    for a in (model.A, model.B, model.C, model.D, model.u0, model.y0):
-        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-    h.update(repr((tuple(model.input_names), tuple(model.output_names))).encode())
-    return h.digest()
 
 
 class StepStream:
@@ -79,12 +63,15 @@ class StepStream:
         self.det = det
         self.id = str(id or det.id)
         self.hypotheses: tuple[str, ...] = tuple(det.hypotheses)
-        self.input_names, self._u_cols = model_columns(model, command_names)
+        self.input_names, col = command_columns(model, command_names)
+        self._u_cols = np.flatnonzero(col >= 0)  # the model's columns of the logged commands, in model order
         self.output_names: tuple[str, ...] = tuple(model.output_names)
         self._u0 = np.asarray(model.u0, dtype=float).copy()
         self._y0 = np.asarray(model.y0, dtype=float).copy()
         self._wrap = np.array([is_wrapped(nm) for nm in self.output_names], dtype=bool)
-        self._key = model_design_key(self.id, model, params or {})
+        self._key = hash_arrays(f"StepStream {self.id}", (model.A, model.B, model.C, model.D, model.u0, model.y0),
+                                (sorted((str(k), repr(v)) for k, v in dict(params or {}).items()),
+                                 tuple(model.input_names), tuple(model.output_names)))
         # the residual's width: one step at trim, then back to the designed state
         det.reset(np.random.default_rng(0))
         r = np.atleast_1d(np.asarray(det.step(0.0, self._u0.copy(), self._y0.copy()).r, dtype=float))
@@ -110,7 +97,7 @@ class StepStream:
         self.reset()
 
     def design_key(self) -> bytes:
-        """:func:`model_design_key` of the detector's id, options and model."""
+        """sha256 of the detector's id, options and model (:func:`fdi_sim.detectors.stream.hash_arrays`)."""
         return self._key
 
     def process_block(self, t_s: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64],

@@ -26,13 +26,15 @@ measurements). A detector that needs no command has ``input_names = ()`` and get
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, Sequence, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BlockOutputs", "EstimatesActuators", "StreamingDetector", "stream_design_key"]
+__all__ = ["BlockOutputs", "EstimatesActuators", "StreamingDetector", "command_columns", "hash_arrays",
+           "stream_design_key"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,3 +209,39 @@ def stream_design_key(stream: object) -> bytes:
     if not isinstance(key, (bytes, bytearray)):
         raise TypeError(f"{getattr(stream, 'id', stream)!r}.design_key() must return bytes, got {type(key).__name__}")
     return bytes(key)
+
+
+# --- helpers for streams built on a linear model ------------------------------------------------
+def command_columns(model: Any, command_names: Sequence[str]) -> tuple[tuple[str, ...], NDArray[np.int64]]:
+    """The model inputs that are logged commands, and each model input's column among them.
+
+    Parameters
+    ----------
+    model : LinearModel
+        Gives ``input_names``.
+    command_names : sequence of str
+        The commands the loop logs.
+
+    Returns
+    -------
+    input_names : tuple of str
+        The model inputs found in ``command_names``, in model order (the stream's ``u`` columns).
+    column : NDArray of int64
+        (n_inputs,) for each model input its column in ``u``, -1 if it is held at trim.
+    """
+    cmds = tuple(command_names)
+    names = tuple(nm for nm in model.input_names if nm in cmds)
+    col = np.array([names.index(nm) if nm in names else -1 for nm in model.input_names], dtype=np.int64)
+    return names, col
+
+
+def hash_arrays(tag: str, arrays: Sequence[NDArray], settings: Any) -> bytes:
+    """sha256 over a tag, the arrays' shapes and float64 bytes, and ``repr(settings)`` (a design key)."""
+    h = hashlib.sha256(tag.encode())
+    for a in arrays:
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    h.update(repr(settings).encode())
+    return h.digest()
+

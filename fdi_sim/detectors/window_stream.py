@@ -34,7 +34,6 @@ block size never changes a bit (all state in arrays, one sequential loop).
 """
 from __future__ import annotations
 
-import hashlib
 import math
 from typing import Any, Sequence
 
@@ -43,49 +42,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fdi_sim.detectors.samples import is_wrapped
+from fdi_sim.detectors.stream import command_columns, hash_arrays
 from fdi_sim.detectors.stream import BlockOutputs
 from fdi_sim.detectors.window_detector import WindowParityDetector
 from fdi_sim.errors import DesignError
 
-__all__ = ["WindowParityStream", "command_columns", "hash_arrays", "window_parity_stream"]
+__all__ = ["WindowParityStream", "window_parity_stream"]
 
 _TWO_PI = 2.0 * math.pi
 # int state
 _S_SEEN, _S_POS, _S_NBAD = range(3)
-
-
-def command_columns(model: Any, command_names: Sequence[str]) -> tuple[tuple[str, ...], NDArray[np.int64]]:
-    """The model inputs that are logged commands, and each model input's column among them.
-
-    Parameters
-    ----------
-    model : LinearModel
-        Gives ``input_names``.
-    command_names : sequence of str
-        The commands the loop logs.
-
-    Returns
-    -------
-    input_names : tuple of str
-        The model inputs found in ``command_names``, in model order (the stream's ``u`` columns).
-    column : NDArray of int64
-        (n_inputs,) for each model input its column in ``u``, -1 if it is held at trim.
-    """
-    cmds = tuple(command_names)
-    names = tuple(nm for nm in model.input_names if nm in cmds)
-    col = np.array([names.index(nm) if nm in names else -1 for nm in model.input_names], dtype=np.int64)
-    return names, col
-
-
-def hash_arrays(tag: str, arrays: Sequence[NDArray], settings: Any) -> bytes:
-    """sha256 over a tag, the arrays' shapes and float64 bytes, and ``repr(settings)`` (a design key)."""
-    h = hashlib.sha256(tag.encode())
-    for a in arrays:
-        a = np.ascontiguousarray(a, dtype=np.float64)
-        h.update(repr(a.shape).encode())
-        h.update(a.tobytes())
-    h.update(repr(settings).encode())
-    return h.digest()
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
