@@ -33,7 +33,8 @@ from fdi_sim.decision.intervals import poisson_rate_interval
 from fdi_sim.errors import StudyError
 from fdi_sim.decision.outcome import LATE_GRACE_S
 from fdi_sim.bank.thresholds_file import HeldRate, StudyMemberThreshold, StudyThresholds
-from fdi_sim.study.rescore import (SCALE_NUDGE, _outside, _runs, exceedances, persistence, persistence_level,
+from fdi_sim.decision.persistence import k_of_n
+from fdi_sim.study.rescore import (SCALE_NUDGE, _outside, _runs, exceedances, persistence_level,
                                    rescore)
 from fdi_sim.study.stats import BANK, dispersion, exposure_s, overdispersed_rate, rate_ratio_interval
 from fdi_sim.units import S_PER_H
@@ -356,7 +357,7 @@ def bank_rate(records: Sequence[Mapping[str, Any]], out_dir: str | Path, scales:
     c, expo = 0, 0.0
     for run in runs:
         ids = [d for d in run.record.get("detectors", []) if d in run.stats]
-        a = np.logical_or.reduce([persistence(exceedances(run.stats[d].statistic, run.stats[d].threshold,
+        a = np.logical_or.reduce([k_of_n(exceedances(run.stats[d].statistic, run.stats[d].threshold,
                                                           run.stats[d].valid, np.array([scales[d]])), run.k, run.n)[0]
                                   for d in ids])
         onset = a & ~np.concatenate(([False], a[:-1]))

@@ -136,13 +136,6 @@ class Episodes:
         return int(self.onset.size)
 
 
-def persistence(exceed: NDArray[np.bool_], k: int, n: int) -> NDArray[np.bool_]:
-    """k-of-n persistence along the last axis from an empty window: the one kernel's vectorised
-    twin, :func:`fdi_sim.decision.persistence.k_of_n` (raises ``DesignError``, a ``ValueError``,
-    unless ``1 <= k <= n``)."""
-    return k_of_n(exceed, k, n)
-
-
 def exceedances(stat: NDArray[np.float64], thr: NDArray[np.float64], valid: NDArray[np.bool_],
                 scales: float | Sequence[float] | NDArray[np.float64] = 1.0) -> NDArray[np.bool_]:
     """``valid and statistic > threshold x scale``; one row per scale for a sequence of scales
@@ -175,7 +168,7 @@ def alarm_episodes(stat: NDArray[np.float64], thr: NDArray[np.float64], valid: N
     k, n : int
         Alarm while at least ``k`` of the last ``n`` samples exceed.
     """
-    return episodes_of(persistence(exceedances(stat, thr, valid), k, n))
+    return episodes_of(k_of_n(exceedances(stat, thr, valid), k, n))
 
 
 def persistence_level(stat: NDArray[np.float64], thr: NDArray[np.float64], valid: NDArray[np.bool_],
@@ -388,7 +381,7 @@ def rescore(records: Sequence[Mapping[str, Any]], out_dir: str | Path,
             if st.t_s.shape != t.shape or not np.array_equal(st.t_s, t):
                 raise StudyError(str(out_dir), f"runs/{r['log']}", f"{d}'s samples are not at the times of {ids[0]}'s",
                                  "re-fly the run: every member of a bank samples at the same times")
-            alarms[d] = persistence(exceedances(st.statistic, st.threshold, st.valid, sc), run.k, run.n)
+            alarms[d] = k_of_n(exceedances(st.statistic, st.threshold, st.valid, sc), run.k, run.n)
         alarms[BANK] = np.logical_or.reduce([alarms[d] for d in ids])
         for ident, a in alarms.items():
             s = slot(ident)
@@ -517,7 +510,7 @@ def check_replay(records: Sequence[Mapping[str, Any]], out_dir: str | Path) -> l
                 bad.append(ReplayMismatch(idx, d, "missing", f"no /fdi/{d}/statistic in runs/{r['log']}"))
                 continue
             e = exceedances(st.statistic, st.threshold, st.valid)
-            a = persistence(e, run.k, run.n)
+            a = k_of_n(e, run.k, run.n)
             for what, mine, logged in (("exceedance", e, st.exceedance), ("alarm", a, st.alarm)):
                 diff = np.flatnonzero(mine != logged)
                 if diff.size:
@@ -532,16 +525,3 @@ def check_replay(records: Sequence[Mapping[str, Any]], out_dir: str | Path) -> l
             if mine_eps != rec_eps:
                 bad.append(ReplayMismatch(idx, d, "episodes", f"replay {mine_eps} vs record {rec_eps}"))
     return bad
-
-
-# --- calibration: moved to fdi_sim.study.calibration, importable from here as before -----------------
-_MOVED = ("Calibration", "CALIBRATION_METHOD", "calibrate_threshold", "CalibrationCheck", "check_calibration")
-
-
-def __getattr__(name: str) -> Any:
-    # lazy (PEP 562): calibration imports this module, so a module-level import here would be a cycle
-    if name in _MOVED:
-        from fdi_sim.study import calibration
-
-        return getattr(calibration, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -316,7 +316,7 @@ def test_threshold_calibrated_on_half_gives_the_target_on_the_other_half(dhc6, d
     on the even runs, the odd ones gave 15 (36 per h [15.9, 70.0]); calibrated on the odd runs, the
     even ones gave 1: the halves differ by their noisiest runs, and the threshold carries the
     calibration half's sampling error. 40 per h puts about 16 alarms in each half."""
-    from fdi_sim.study.rescore import check_calibration
+    from fdi_sim.study.calibration import check_calibration
 
     _, _, out, _ = dhc6
     recs = load_records(out)

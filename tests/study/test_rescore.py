@@ -13,6 +13,8 @@ import pytest
 
 from fdi_sim.errors import StudyError
 from fdi_sim.bank.kernels import decide
+from fdi_sim.decision.persistence import k_of_n
+from fdi_sim.study.calibration import calibrate_threshold, check_calibration
 from fdi_sim.study import rescore as R
 from fdi_sim.study.stats import BANK, summarize
 
@@ -78,7 +80,7 @@ def test_alarm_episodes_is_the_banks_rule(k, n):
         stat, thr, valid = random_case(rng)
         want = bank_rule(stat, thr, valid, k, n, rng)
         assert np.array_equal(want, loop_rule(stat, thr, valid, k, n))
-        got = R.persistence(R.exceedances(stat, thr, valid), k, n)
+        got = k_of_n(R.exceedances(stat, thr, valid), k, n)
         assert np.array_equal(got, want)
         ep = R.alarm_episodes(stat, thr, valid, k, n)
         rebuilt = np.zeros(len(stat), bool)
@@ -94,7 +96,7 @@ def test_episodes_at_the_edges():
     assert ep.onset.tolist() == [0, 4, 6] and ep.end.tolist() == [2, 5, 8] and ep.is_open.tolist() == [False, False, True]
     assert len(R.episodes_of(np.zeros(5, bool))) == 0
     with pytest.raises(ValueError):
-        R.persistence(np.zeros(4, bool), 3, 2)
+        k_of_n(np.zeros(4, bool), 3, 2)
 
 
 def test_persistence_level_inverts_the_rule():
@@ -104,7 +106,7 @@ def test_persistence_level_inverts_the_rule():
         stat, thr, valid = random_case(rng, 300)
         z = R.persistence_level(stat, thr, valid, k, n)
         for s in np.concatenate((rng.uniform(0.2, 4.0, 40), [1.0])):
-            assert np.array_equal(z > s, R.persistence(R.exceedances(stat, thr, valid, s), k, n))
+            assert np.array_equal(z > s, k_of_n(R.exceedances(stat, thr, valid, s), k, n))
 
 
 # --- real runs -------------------------------------------------------------------------------------------
@@ -209,7 +211,7 @@ def test_roc_curves(study):
 def test_calibrated_scale_is_the_lowest_meeting_the_target(study, detector):
     out, records = study
     target = 30.0
-    cal = R.calibrate_threshold(records, out, detector, target)
+    cal = calibrate_threshold(records, out, detector, target)
     allowed = target * cal.exposure_h
     at = R.rescore(records, out, [cal.scale, cal.scale * (1 - 1e-7), cal.scale * 1.5, cal.scale * 3.0])
     fa = at.detectors[detector].false_alarms
@@ -224,7 +226,7 @@ def test_calibration_on_one_half_holds_on_the_other(study):
     within its interval."""
     out, records = study
     for detector in ("kinematic-flow-angles-v1", BANK):
-        chk = R.check_calibration(records, out, detector, 50.0, "even")
+        chk = check_calibration(records, out, detector, 50.0, "even")
         assert chk.calibration.runs == 6 and chk.held_out_runs == 6
         assert chk.far_per_h_ci[0] <= chk.far_per_h <= chk.far_per_h_ci[1]
         direct = R.rescore([r for r in records if r["index"] % 2], out, [chk.calibration.scale])
@@ -235,13 +237,13 @@ def test_calibration_on_one_half_holds_on_the_other(study):
 def test_bad_input(study):
     out, records = study
     with pytest.raises(StudyError, match="no-such"):
-        R.calibrate_threshold(records, out, "no-such-detector-v1", 1.0)
+        calibrate_threshold(records, out, "no-such-detector-v1", 1.0)
     with pytest.raises(StudyError, match="angle-magnitude"):
         R.rescore([dict(records[0], decision="angle-magnitude")], out, [1.0])
     with pytest.raises(ValueError, match="detection"):
         R.rescore(records, out, [1.0], detection="later")
     with pytest.raises(ValueError, match="split"):
-        R.check_calibration(records, out, BANK, 1.0, "third")
+        check_calibration(records, out, BANK, 1.0, "third")
     # a run without a log is skipped and counted
     rs = R.rescore([dict(records[0], log=None)] + records[1:], out, [1.0])
     assert rs.runs == 11 and rs.runs_without_log == 1
