@@ -80,8 +80,10 @@ def fault_onset_s(log) -> float:
 
 
 def main(quick: bool = False) -> None:
-    cal_seeds = tuple(range(1, 9)) if not quick else (1, 2)
-    held_seeds = tuple(range(11, 19)) if not quick else (11, 12)
+    from fdi_sim.seeds import seeds
+
+    cal_seeds = seeds("kinematic-calibration")[:None if not quick else 2]
+    held_seeds = seeds("kinematic-card")[:None if not quick else 2]
     dur = 120.0
     out = Path(tempfile.mkdtemp(prefix="kin_card_"))
     stats: dict = {}

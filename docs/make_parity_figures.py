@@ -18,6 +18,7 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Ellipse  # noqa: E402
 from scipy.spatial import ConvexHull  # noqa: E402
 
+from fdi_sim.seeds import seeds  # noqa: E402
 from fdi_sim.papers.dhc6_icing_flights import FlightPlan, StudyConfig, fly, fly_all, linearize_models  # noqa: E402
 from fdi_sim.papers.dhc6_icing_study import P_CANDIDATES, evaluate  # noqa: E402
 from fdi_sim.papers.hagenblad_f16 import (  # noqa: E402
@@ -227,7 +228,7 @@ DHC6_CONDITIONS = {"light turbulence, 2 deg bias": StudyConfig(turbulence="light
 DHC6_SETS = ("nominal", "robust", "robust+trim", "robust-clean")
 DHC6_P = P_CANDIDATES
 #: fresh fault-free eta 0.1 flights for the p chosen on the study's flights (no seed of fly_all reaches 9000)
-DHC6_FRESH_SEEDS = tuple(range(9000, 9020))
+DHC6_FRESH_SEEDS = seeds("parity-fresh")
 
 
 def _fa(fa):

@@ -173,7 +173,8 @@ def test_no_module_level_import_cycles() -> None:
 #: the data flow (DESIGN.md), lowest first: a module may import its own package and any package of
 #: a lower rank, at module level or inside a function (that runs too, at call time)
 RANKS: tuple[tuple[str, ...], ...] = (
-    ("units", "errors", "signals", "threads", "data", "isa", "operating_point", "registry", "contracts"),
+    ("units", "errors", "signals", "threads", "data", "isa", "operating_point", "registry", "contracts", "seeds",
+     "stamp"),
     ("flightlog", "aircraft", "sensors", "pilot", "decision"),
     ("faults", "linear", "scenario"),
     ("detectors",),

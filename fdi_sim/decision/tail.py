@@ -21,6 +21,7 @@ import numpy as np
 from typing import Sequence
 
 from numpy.typing import NDArray
+from scipy.optimize import minimize_scalar
 from scipy.stats import genpareto
 
 from fdi_sim.decision.base import check_probability
@@ -135,8 +136,12 @@ TAIL_EPISODES = 100
 MIN_EPISODES = 30
 #: alarm episodes an empirical episode threshold needs
 MIN_EMPIRICAL_EPISODES = 10
-#: chi-square(1) 95 % point: a fitted positive shape this much more likely than xi = 0 is kept
-HEAVY_DEVIANCE = 3.841
+#: 95 % point of the 50:50 mixture of chi-square(0) and chi-square(1) (the deviance of a shape on
+#: its boundary xi = 0): a fitted positive shape this much more likely than xi = 0 is kept
+HEAVY_DEVIANCE = 2.706
+#: the largest ratio of the fitted level's episode rate to the target at which the tail method's
+#: coverage was measured (docs/tail_coverage.md); a target further out is refused
+MAX_EXTRAPOLATION = 100000.0
 
 
 def persistence_series(stat: NDArray[np.float64], valid: NDArray[np.bool_], k: int, n: int) -> NDArray[np.float64]:
@@ -172,6 +177,40 @@ def _runs(m: NDArray[np.float64], u: float) -> tuple[NDArray[np.float64], int]:
     starts = np.flatnonzero(edges == 1)
     # a run's maximum: from its start to the next start (the samples between are -inf)
     return np.maximum.reduceat(np.where(above, m, -np.inf), starts), len(starts)
+
+
+def _cluster_maxima(m: NDArray[np.float64], u: float, run: int) -> NDArray[np.float64]:
+    """Maxima of the clusters of ``m > u``: a cluster ends after ``run`` samples at or below ``u``
+    (runs declustering, Coles 2001 sec. 5.3.2)."""
+    idx = np.flatnonzero(m > u)
+    if idx.size == 0:
+        return np.zeros(0)
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(idx) > run) + 1])
+    return np.maximum.reduceat(m[idx], starts)
+
+
+def _run_length(cs: Sequence["_Crossings"], w: NDArray[np.int64], u: float) -> int:
+    """The run length that declusters exceedances of ``u`` into independent clusters, from the
+    intervals estimator of the extremal index (Ferro & Segers 2003, eq. 4 and sec. 4): with ``N``
+    exceedances and inter-exceedance times ``T``, ``theta = min(1, 2 (sum(T - 1))^2 / ((N - 1)
+    sum((T - 1)(T - 2))))`` (``2 (sum T)^2 / ((N - 1) sum T^2)`` when no ``T`` exceeds 2), and the
+    ``theta N``-th largest ``T`` separates clusters. A statistic that chatters about the level
+    (a 10 s mean dipping below it for a sample or two) is then one cluster, not many episodes
+    with tiny excesses, whose mixture would pass for a heavy tail."""
+    gaps = [np.repeat(np.diff(np.flatnonzero(c.m > u)), int(wi)) for c, wi in zip(cs, w) if wi]
+    t = np.concatenate(gaps).astype(float) if gaps else np.zeros(0)
+    n_exc = t.size + sum(int(wi) for c, wi in zip(cs, w) if wi and (c.m > u).any())  # N - 1 gaps per flight
+    if t.size < 2:
+        return 1
+    if t.max() <= 2.0:
+        theta = min(1.0, 2.0 * t.sum() ** 2 / (t.size * float(np.sum(t * t))))
+    else:
+        den = float(np.sum((t - 1.0) * (t - 2.0)))
+        theta = 1.0 if den <= 0.0 else min(1.0, 2.0 * float(np.sum(t - 1.0)) ** 2 / (t.size * den))
+    n_clusters = max(1, int(math.floor(theta * n_exc)))
+    if n_clusters > t.size:
+        return 1
+    return max(1, int(np.sort(t)[::-1][n_clusters - 1]))
 
 
 class _Crossings:
@@ -280,11 +319,10 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
     return _episode_fit(pool, w, rate_per_h, hours)[:2]
 
 
-def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float, hours: float,
-                 power: float | None = None, heavy: bool | None = None) -> tuple[float, str, float, bool]:
+def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float,
+                 hours: float) -> tuple[float, str, float, bool]:
     """:func:`episode_threshold` on the flights of ``pool`` counted ``w`` times each, and the scale
-    (``power``) and tail (``heavy``) it chose, which a bootstrap resample is given so that it
-    varies the fit, not the model."""
+    (``power``) and tail (``heavy``) it chose (every bootstrap resample chooses again)."""
     if not (rate_per_h > 0.0 and math.isfinite(rate_per_h)):
         raise DesignError(f"episode rate target must be > 0 per flight hour, got {rate_per_h}")
     cs = pool.cs
@@ -309,7 +347,8 @@ def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float, hours: fl
         else:
             hi = mid
     u = lo
-    peaks = np.concatenate([np.repeat(_runs(c.m, u)[0], int(wi)) for c, wi in zip(cs, w) if wi])
+    run = _run_length(cs, w, u)
+    peaks = np.concatenate([np.repeat(_cluster_maxima(c.m, u, run), int(wi)) for c, wi in zip(cs, w) if wi])
     if peaks.size < MIN_EPISODES:
         raise DesignError(f"only {peaks.size} alarm episodes above any level of the training flights (a fit needs "
                           f"{MIN_EPISODES}); fly more or longer calibration flights")
@@ -320,36 +359,88 @@ def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float, hours: fl
         split = max(split, counter.count(x) / r)
     if MIN_EMPIRICAL_EPISODES <= want / split < peaks.size:
         i = int(math.floor(want / split))  # the level with that many peaks above it
-        return float(top[i]), (f"empirical: {i} of {peaks.size} episode peaks above it in {hours:.2f} h "
+        return float(top[i]), (f"empirical: {i} of {peaks.size} cluster peaks above it in {hours:.2f} h "
                                 f"(split {split:.2f})"), 1.0, False
-    fits = {}
-    for pw in ((1.0, 2.0) if u > 0.0 else (1.0,)) if power is None else (power,):
-        with np.errstate(over="ignore"):
-            z = peaks ** pw - u ** pw
-        if pw != 1.0 and not np.isfinite(z).all():  # peaks past 1e154 (a diverging statistic): x^2 overflows
-            continue
-        # a resample told the tail is exponential needs no fit: the same numbers at a tenth of the cost
-        fits[pw] = (0.0, float(z.mean()), z) if heavy is False else genpareto.fit(z, floc=0.0)[::2] + (z,)
-    pw = min(fits, key=lambda q: abs(fits[q][0]))  # the scale on which the tail is nearest exponential
-    xi, sigma, z = fits[pw]
-    how = "xi 0 (given)"
-    if heavy is not False:
-        # exponential (xi = 0) unless the fitted heavier tail is significant: deviance of the nested
-        # models against chi-square(1) at 5 % (Coles 2001, sec. 2.6.6 and 3.4.2, the Gumbel check)
-        deviance = 2.0 * (float(np.sum(genpareto.logpdf(z, xi, loc=0.0, scale=sigma)))
-                          - float(np.sum(genpareto.logpdf(z, 0.0, loc=0.0, scale=float(z.mean())))))
-        if heavy is None:
-            heavy = xi > 0.0 and deviance > HEAVY_DEVIANCE
-        how = (f"xi {xi:.3f}, deviance {deviance:.2f}" if heavy and xi > 0.0 else
-               f"xi 0 (MLE {xi:.3f}, deviance {deviance:.2f})")
-    if not heavy or xi < 0.0:
-        xi, sigma = 0.0, float(z.mean())
+    xi, sigma, pw, heavy, how = _choose_tail(peaks, u)
     lam = peaks.size * split / hours
+    at_u = counter.count(u) / hours  # episodes per hour at the fitted level: the extrapolation's start
+    if at_u / rate_per_h > MAX_EXTRAPOLATION:
+        raise DesignError(f"{rate_per_h:.3g} episodes per h is {at_u / rate_per_h:,.0f} x below the {at_u:.3g} per h "
+                          f"the training flights show at the fitted level, beyond the {MAX_EXTRAPOLATION:,.0f} x at "
+                          f"which the tail method's coverage was measured (docs/tail_coverage.md): fly at least "
+                          f"{hours * at_u / (rate_per_h * MAX_EXTRAPOLATION):.3g} x the {hours:.3g} h of calibration "
+                          f"flights")
     thr = u if rate_per_h >= lam else \
         (u ** pw + float(genpareto.ppf(1.0 - rate_per_h / lam, xi, loc=0.0, scale=sigma))) ** (1.0 / pw)
     on = "" if pw == 1.0 else f" of the statistic^{pw:g}"
-    return thr, (f"GPD{on} over {peaks.size} alarm episodes above {u:.4g} ({lam:.3g} per h, split {split:.2f}), "
-                 f"{how}, sigma {sigma:.3g}, extrapolated to {rate_per_h:.3g} per h"), pw, bool(heavy and xi > 0.0)
+    return thr, (f"GPD{on} over {peaks.size} clusters (run length {run}) above {u:.4g} ({lam:.3g} episodes per h, "
+                 f"split {split:.2f}), "
+                 f"{how}, sigma {sigma:.3g}, extrapolated {lam / rate_per_h:.3g} x to {rate_per_h:.3g} per h"), \
+        pw, heavy
+
+
+def _gpd_fit(z: NDArray[np.float64]) -> tuple[float, float, float]:
+    """Maximum-likelihood generalized Pareto fit to excesses ``z > 0`` with the shape held at or
+    above 0: ``(xi, sigma, log-likelihood)``.
+
+    The profile likelihood in ``theta = xi / sigma`` (Grimshaw 1993): for a given ``theta`` the
+    best shape is ``xi = mean(log(1 + theta z))``, and the log-likelihood
+    ``-n log(xi / theta) - (1 + 1 / xi) sum(log(1 + theta z))``; at ``theta -> 0`` it is the
+    exponential's, ``-n log(mean z) - n``. A bounded one-dimensional search (far faster than the
+    general two-parameter fit, which the bootstrap would call thousands of times).
+    """
+    n = z.size
+    zbar = float(z.mean())
+    ll_exp = -n * math.log(zbar) - n
+
+    def neg(log_t: float) -> float:
+        t = math.exp(log_t) / zbar
+        lz = np.log1p(t * z)
+        xi = float(lz.mean())
+        return n * math.log(xi / t) + (1.0 + 1.0 / xi) * float(lz.sum())
+
+    best = minimize_scalar(neg, bounds=(-12.0, 8.0), method="bounded", options={"xatol": 1e-6})
+    if -float(best.fun) <= ll_exp:
+        return 0.0, zbar, ll_exp
+    t = math.exp(float(best.x)) / zbar
+    xi = float(np.log1p(t * z).mean())
+    return xi, xi / t, -float(best.fun)
+
+
+def _choose_tail(peaks: NDArray[np.float64], u: float) -> tuple[float, float, float, bool, str]:
+    """The tail of the episode peaks above ``u``: ``(xi, sigma, power, heavy, text)``.
+
+    Two light tails compete on the likelihood of the same peaks (both one parameter, so no
+    penalty is needed): exponential in the statistic (a chi-square form's upcrossings fall as
+    ``exp(-x / 2)``) and exponential in its square (a Gaussian mean's fall as ``exp(-x^2 / 2 s^2)``,
+    Rice's formula), the latter scored on the statistic's own scale (its density carries the
+    Jacobian ``2 x``). A heavier tail (generalized Pareto, ``xi > 0``, on the chosen scale) is kept
+    where its deviance against that exponential exceeds :data:`HEAVY_DEVIANCE`, the 95 % point of
+    the 50:50 mixture of chi-square(0) and chi-square(1) that a shape on the boundary ``xi = 0``
+    follows (Self & Liang 1987). The choice is a selection: :func:`confident_episode_threshold`
+    repeats it on every bootstrap resample, so its bound carries the selection's variability.
+    """
+    best = None
+    for pw in (1.0, 2.0) if u > 0.0 else (1.0,):
+        with np.errstate(over="ignore"):
+            z = peaks ** pw - u ** pw
+        if not np.isfinite(z).all() or not (z > 0.0).any():
+            continue
+        z = np.maximum(z, 1e-300)
+        s = float(z.mean())
+        # log-likelihood of the peaks on the statistic's scale: exponential density of z times dz/dx
+        ll = -z.size * math.log(s) - z.size + (0.0 if pw == 1.0 else float(np.sum(np.log(pw * peaks ** (pw - 1.0)))))
+        if best is None or ll > best[0]:
+            best = (ll, pw, z)
+    if best is None:
+        raise DesignError("the episode peaks have no spread above the fitted level: no tail to fit")
+    _, pw, z = best
+    xi, sigma, ll_gpd = _gpd_fit(z)
+    s = float(z.mean())
+    deviance = 2.0 * (ll_gpd - (-z.size * math.log(s) - z.size))
+    if xi > 0.0 and deviance > HEAVY_DEVIANCE:
+        return xi, sigma, pw, True, f"xi {xi:.3f}, deviance {deviance:.2f}"
+    return 0.0, s, pw, False, f"xi 0 (MLE {xi:.3f}, deviance {deviance:.2f})"
 
 
 def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hours: Sequence[float],
@@ -384,15 +475,17 @@ def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per
     if len(pool.cs) < 2:
         raise DesignError("a confident threshold needs at least two training flights")
     k = len(pool.cs)
-    point, how, power, heavy = _episode_fit(pool, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()))
-    boot = []
+    point, how, _, _ = _episode_fit(pool, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()))
+    boot, heavy = [], 0
     for _ in range(n_boot):
         w = np.bincount(rng.integers(0, k, k), minlength=k)
         try:
-            boot.append(_episode_fit(pool, w, rate_per_h, float(w @ h), power=power, heavy=heavy)[0])
+            thr, _, _, is_heavy = _episode_fit(pool, w, rate_per_h, float(w @ h))
+            boot.append(thr)
+            heavy += is_heavy
         except DesignError:
             continue  # a resample with too few episodes says nothing about the bound
     if len(boot) < n_boot // 2:
         raise DesignError(f"only {len(boot)} of {n_boot} bootstrap resamples could be fitted; fly more or longer "
                           "calibration flights")
-    return _bound(point, how, boot, level, k)
+    return _bound(point, f"{how} (a heavy tail in {heavy} of {len(boot)} resamples)", boot, level, k)

@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Sequence
 
+from fdi_sim.seeds import seeds as registry_seeds
 from fdi_sim.decision.intervals import poisson_rate_interval
 from fdi_sim.scenario import load
 from fdi_sim.scenario.loader import from_dict
@@ -36,8 +37,8 @@ POINTS: dict[str, tuple[str, ...]] = {
 #: 201-208 were the report until the alarm of seed 204 (DHC-6 approach) was traced to the
 #: per-sample tail fit, which led to the episode-rate thresholds; the bar is now reported on
 #: 301-308, which no design decision saw
-DEVELOPMENT_SEEDS = tuple(range(101, 109)) + tuple(range(201, 209))
-HELD_OUT_SEEDS = tuple(range(301, 309))
+DEVELOPMENT_SEEDS = registry_seeds("bank-development-1") + registry_seeds("bank-development-2")
+HELD_OUT_SEEDS = registry_seeds("bank-bar")
 
 
 @dataclass(frozen=True)

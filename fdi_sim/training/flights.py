@@ -15,13 +15,15 @@ from pathlib import Path
 from typing import Any, Sequence
 
 
+from fdi_sim.seeds import seeds as _seeds
 from fdi_sim.errors import DesignError
 from fdi_sim.scenario import Scenario
 from fdi_sim.scenario.loader import from_dict
 
 
-#: training seeds are TRAINING_SEED_BASE + i: far from the small seeds scenarios and studies use
-TRAINING_SEED_BASE = 1_000_000
+#: training seeds are TRAINING_SEED_BASE + i (the seed registry's "training" set: far from the
+#: small seeds scenarios and studies use)
+TRAINING_SEED_BASE = _seeds("training")[0]
 
 
 DEFAULT_TRAINING_FLIGHTS = 24
@@ -46,7 +48,11 @@ def fault_free(sc: Scenario, seed: int, duration_s: float) -> Scenario:
 
 
 def training_seeds(n: int) -> tuple[int, ...]:
-    return tuple(TRAINING_SEED_BASE + i for i in range(n))
+    """The first ``n`` seeds of the registry's training set."""
+    s = _seeds("training")
+    if n > len(s):
+        raise ValueError(f"{n} training flights asked for; the seed registry's training set has {len(s)}")
+    return s[:n]
 
 
 def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress: bool = True,
