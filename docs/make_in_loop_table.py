@@ -156,7 +156,12 @@ def render(data: dict) -> str:
         good = sorted({r["detector"] for r in sc["rows"] if r["detector"] in SEED_METHODS and r["correct"]
                        and not r["early"]})
         lines.append(f"- {sc['scenario']}: " + (", ".join(good) if good else "**none**"))
-    return "\n".join(lines) + "\n"
+    marked: list[str] = []
+    for line in lines:  # each table says what it is (tests/test_generated_docs.py): measured, stamp in the head line
+        if line.startswith("|") and not (marked and marked[-1].startswith("|")):
+            marked.append("<!-- table: result, unstamped; regenerate: python docs/make_in_loop_table.py -->")
+        marked.append(line)
+    return "\n".join(marked) + "\n"
 
 
 def stamp() -> str:

@@ -140,7 +140,8 @@ def stale_blocks(path: Path, root: Path = ROOT) -> list[str]:
     path = Path(path)
     text = path.read_text()
     if path.suffix == ".json":
-        d = json.loads(text).get("stamp")
+        card = json.loads(text)
+        d = card.get("stamp") if isinstance(card, dict) else None
         stamps = [] if not isinstance(d, dict) else [Stamp(**{**d, "inputs": tuple(d["inputs"])})]
     else:
         stamps = [s for s, _ in read_blocks(text)]

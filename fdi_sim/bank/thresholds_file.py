@@ -36,8 +36,13 @@ class HeldRate:
         ``false_alarms / exposure_h`` [1/h].
     ci_per_h : tuple of float
         Exact Poisson interval at the file's confidence [1/h].
-    target_inside : bool
-        The target rate lies in ``ci_per_h``.
+    verdict : str
+        The interval against the target: ``"contains"``, ``"below"``, ``"above"`` or
+        ``"undetermined"`` (no exposure) (:func:`fdi_sim.decision.intervals.rate_verdict`).
+    detectable_ratio : float
+        The smallest ratio of a true rate to the target these hours would show as ``"above"``
+        half the time [-] (:func:`fdi_sim.decision.intervals.detectable_ratio`): what a
+        ``"contains"`` with few alarms is worth.
     """
 
     runs: int
@@ -45,7 +50,52 @@ class HeldRate:
     exposure_h: float
     far_per_h: float
     ci_per_h: tuple[float, float]
-    target_inside: bool
+    verdict: str
+    detectable_ratio: float
+
+    @property
+    def target_inside(self) -> bool:
+        """The target lies in ``ci_per_h``."""
+        return self.verdict == "contains"
+
+
+@dataclass(frozen=True)
+class MemberRate:
+    """One member's false alarms on a validation study."""
+
+    id: str
+    target_per_h: float
+    rate: HeldRate
+
+
+@dataclass(frozen=True)
+class Validation:
+    """A thresholds file checked on a fresh fault-free study (a seed no calibration used).
+
+    Attributes
+    ----------
+    study, study_identity : str
+    seed : int
+        The study's master seed (the seed registry's validation set).
+    runs : int
+    flight_h : float
+        Completed flight hours [h].
+    bank : HeldRate
+        The bank against ``far_per_h``.
+    members : tuple of MemberRate
+        Each member against its share.
+    version : str
+        fdi-sim version that checked it.
+    """
+
+    study: str
+    study_identity: str
+    seed: int
+    runs: int
+    flight_h: float
+    bank: HeldRate
+    members: tuple[MemberRate, ...]
+    version: str
 
 
 @dataclass(frozen=True)
@@ -71,8 +121,10 @@ class StudyMemberThreshold:
         Held-out rate over the calibration half's at ``threshold`` [-] (inf when that half has none).
     rate_ratio_ci : tuple of float
         Its exact conditional interval, scaled by the runs' dispersion [-].
-    consistent : bool
-        1 lies in ``rate_ratio_ci``: the two halves agree, allowing for both counts' sampling error.
+    ratio_check : str
+        ``"consistent"`` (1 lies in ``rate_ratio_ci``: the two halves agree, allowing for both
+        counts' sampling error), ``"inconsistent"``, or ``"undetermined"`` (no alarm in either
+        half: a ratio of 0 to 0 can say nothing).
     """
 
     id: str
@@ -85,7 +137,7 @@ class StudyMemberThreshold:
     method: str
     rate_ratio: float
     rate_ratio_ci: tuple[float, float]
-    consistent: bool
+    ratio_check: str
 
 
 @dataclass(frozen=True)
@@ -123,6 +175,8 @@ class StudyThresholds:
     bank_calibration, bank_held_out : HeldRate
         The bank (OR of its members at their thresholds) against ``far_per_h``.
     method : str
+    validation : Validation or None
+        The check on a fresh study (another seed), once flown: ``fdi-sim study STUDY --validate``.
     """
 
     aircraft: str
@@ -147,6 +201,7 @@ class StudyThresholds:
     bank_calibration: HeldRate
     bank_held_out: HeldRate
     method: str
+    validation: "Validation | None" = None
 
     def member_method(self, member_id: str) -> str:
         """The method string a bank records for a member that uses this file's threshold."""
@@ -169,7 +224,8 @@ def _strict(cls: type, d: Any, source: str, where: str) -> dict[str, Any]:
                             "write the file with `fdi-sim study STUDY --calibrate OUT.toml`")
     names = [f.name for f in fields(cls)]
     extra = sorted(set(d) - set(names))
-    missing = [n for n in names if n not in d]
+    optional = {f.name for f in fields(cls) if f.default is None}  # absent until made (validation)
+    missing = [n for n in names if n not in d and n not in optional]
     if extra or missing:
         key = f"{where}.{(extra or missing)[0]}" if where else (extra or missing)[0]
         raise ScenarioError(source, key, ("unknown key" + "s" * (len(extra) > 1) + f" {', '.join(extra)}" if extra
@@ -179,11 +235,30 @@ def _strict(cls: type, d: Any, source: str, where: str) -> dict[str, Any]:
     return d
 
 
+#: what a rate's interval says of its target (:func:`fdi_sim.decision.intervals.rate_verdict`)
+VERDICTS = ("contains", "below", "above", "undetermined")
+#: what two halves' rate ratio says (:class:`StudyMemberThreshold`)
+RATIO_CHECKS = ("consistent", "inconsistent", "undetermined")
+
+
+def _ratio_check(m: dict[str, Any], source: str, i: int) -> str:
+    from fdi_sim.errors import ScenarioError
+
+    r = str(m["ratio_check"])
+    if r not in RATIO_CHECKS:
+        raise ScenarioError(source, f"members[{i}].ratio_check", f"{r!r} is not one of {', '.join(RATIO_CHECKS)}",
+                            "write the file again with `fdi-sim study STUDY --calibrate OUT.toml`")
+    return r
+
+
 def _held(d: Any, source: str, where: str) -> HeldRate:
     d = _strict(HeldRate, d, source, where)
     try:
+        verdict = str(d["verdict"])
+        if verdict not in VERDICTS:
+            raise ValueError(f"verdict {verdict!r} is not one of {', '.join(VERDICTS)}")
         return HeldRate(int(d["runs"]), int(d["false_alarms"]), float(d["exposure_h"]), float(d["far_per_h"]),
-                        (float(d["ci_per_h"][0]), float(d["ci_per_h"][1])), bool(d["target_inside"]))
+                        (float(d["ci_per_h"][0]), float(d["ci_per_h"][1])), verdict, float(d["detectable_ratio"]))
     except (TypeError, ValueError, IndexError) as exc:
         from fdi_sim.errors import ScenarioError
 
@@ -202,6 +277,13 @@ def thresholds_to_dict(t: StudyThresholds) -> dict[str, Any]:
     for m in d["members"]:
         m["rate_ratio_ci"] = list(m["rate_ratio_ci"])
     d["members"] = list(d["members"])
+    if d["validation"] is None:
+        del d["validation"]
+    else:
+        v = d["validation"]
+        for h in [v["bank"]] + [m["rate"] for m in v["members"]]:
+            h["ci_per_h"] = list(h["ci_per_h"])
+        v["members"] = list(v["members"])
     return d
 
 
@@ -218,6 +300,12 @@ def write_thresholds(t: StudyThresholds, path: str | Path) -> Path:
              f"[{b.ci_per_h[0]:.3g}, {b.ci_per_h[1]:.3g}], target {t.far_per_h:g} "
              f"{'inside' if b.target_inside else 'OUTSIDE'}; members outside: "
              f"{', '.join(m.id for m in t.members if not m.held_out.target_inside) or 'none'}\n")
+    v = t.validation
+    head += ("# validation: none yet (`fdi-sim study STUDY --validate`)\n" if v is None else
+             f"# validation on {v.study} (seed {v.seed}, {v.flight_h:.1f} h): the bank {v.bank.false_alarms} in "
+             f"{v.bank.exposure_h:.1f} h = {v.bank.far_per_h:.3g} per h [{v.bank.ci_per_h[0]:.3g}, "
+             f"{v.bank.ci_per_h[1]:.3g}], target {t.far_per_h:g}: {v.bank.verdict} (a rate {v.bank.detectable_ratio:.2g} x "
+             f"the target would show as above half the time)\n")
     tmp = path.with_suffix(f".tmp{os.getpid()}")
     tmp.write_text(head + tomli_w.dumps(thresholds_to_dict(t)))
     os.replace(tmp, path)
@@ -256,7 +344,20 @@ def read_thresholds(path: str | Path) -> StudyThresholds:
             str(m["id"]), float(m["threshold"]), float(m["trained_threshold"]), float(m["scale"]),
             float(m["target_per_h"]), _held(m["calibration"], src, f"members[{i}].calibration"),
             _held(m["held_out"], src, f"members[{i}].held_out"), str(m["method"]), float(m["rate_ratio"]),
-            (float(m["rate_ratio_ci"][0]), float(m["rate_ratio_ci"][1])), bool(m["consistent"])))
+            (float(m["rate_ratio_ci"][0]), float(m["rate_ratio_ci"][1])), _ratio_check(m, src, i)))
+    validation = None
+    if "validation" in d:
+        v = _strict(Validation, d["validation"], src, "validation")
+        try:
+            validation = Validation(
+                str(v["study"]), str(v["study_identity"]), int(v["seed"]), int(v["runs"]), float(v["flight_h"]),
+                _held(v["bank"], src, "validation.bank"),
+                tuple(MemberRate(str(_strict(MemberRate, m, src, f"validation.members[{i}]")["id"]),
+                                 float(m["target_per_h"]), _held(m["rate"], src, f"validation.members[{i}].rate"))
+                      for i, m in enumerate(v["members"])), str(v["version"]))
+        except (TypeError, ValueError) as exc:
+            raise ScenarioError(src, "validation", f"a value of the wrong type ({exc})",
+                                "validate the file again with `fdi-sim study STUDY --validate`") from None
     try:
         return StudyThresholds(
             str(d["aircraft"]), str(d["study"]), str(d["study_identity"]), int(d["runs"]), float(d["flight_h"]),
@@ -265,7 +366,7 @@ def read_thresholds(path: str | Path) -> StudyThresholds:
             float(d["rate_hz"]), int(d["persistence_k"]), int(d["persistence_n"]), float(d["far_per_h"]),
             str(d["split"]), float(d["confidence"]), tuple(members),
             _held(d["bank_calibration"], src, "bank_calibration"), _held(d["bank_held_out"], src, "bank_held_out"),
-            str(d["method"]))
+            str(d["method"]), validation)
     except (TypeError, ValueError) as exc:
         raise ScenarioError(src, "", f"a value of the wrong type ({exc})",
                             "write the file again with `fdi-sim study STUDY --calibrate OUT.toml`") from None

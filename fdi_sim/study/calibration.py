@@ -29,7 +29,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from fdi_sim import __version__
-from fdi_sim.decision.intervals import poisson_rate_interval
+from fdi_sim.decision.intervals import detectable_ratio, poisson_rate_interval, rate_verdict
 from fdi_sim.errors import StudyError
 from fdi_sim.decision.outcome import LATE_GRACE_S
 from fdi_sim.bank.thresholds_file import HeldRate, StudyMemberThreshold, StudyThresholds
@@ -251,10 +251,12 @@ class CalibrationCheck:
     rate_ratio_ci : tuple of float
         Its exact conditional interval, scaled by the dispersion of the per-run counts of both
         halves (:func:`fdi_sim.study.stats.rate_ratio_interval`).
-    consistent : bool
-        1 lies in ``rate_ratio_ci``: the held-out rate is what the calibration predicts. This is
-        the check that allows for the calibration's own sampling error (the threshold rests on the
-        calibration half's few alarms); ``target_inside`` treats the threshold as exact.
+    ratio_check : str
+        ``"consistent"``: 1 lies in ``rate_ratio_ci``, the held-out rate is what the calibration
+        predicts; ``"inconsistent"``; ``"undetermined"`` when neither half has an alarm (0 against
+        0 says nothing). This is the check that allows for the calibration's own sampling error
+        (the threshold rests on the calibration half's few alarms); ``target_inside`` treats the
+        threshold as exact.
     """
 
     calibration: Calibration
@@ -271,7 +273,7 @@ class CalibrationCheck:
     calibration_false_alarms: int | None = None
     rate_ratio: float | None = None
     rate_ratio_ci: tuple[float, float] | None = None
-    consistent: bool | None = None
+    ratio_check: str | None = None
 
 
 def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path, detector: str,
@@ -328,7 +330,8 @@ def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path,
                                             phi_both if phi_both is not None else 1.0)
     return CalibrationCheck(cal, split, runs, c, expo_h, c / expo_h, (float(lo), float(hi)),
                             bool(lo <= target_per_h <= hi), confidence, phi, (float(plain[0]), float(plain[1])),
-                            c_cal, float(rho), (float(r_lo), float(r_hi)), bool(r_lo <= 1.0 <= r_hi))
+                            c_cal, float(rho), (float(r_lo), float(r_hi)),
+                            "undetermined" if c == c_cal == 0 else "consistent" if r_lo <= 1.0 <= r_hi else "inconsistent")
 
 
 # --- the thresholds file of a study ------------------------------------------------------------------
@@ -339,14 +342,19 @@ STUDY_METHOD = (
     "runs (fdi_sim.study.calibration.tail_calibrate_threshold: the trained thresholds' method, on the study's "
     "runs; the count where too few episodes), checked on the held-out half (exact Poisson interval, scaled by the "
     "runs' dispersion where their alarms cluster) and against the calibration half's own count (rate ratio, exact "
-    "conditional interval: consistent when it holds 1); the bank: the OR of the members at those thresholds under "
+    "conditional interval: consistent when it holds 1, undetermined when neither half alarms); the bank: the OR of the members at those thresholds under "
     "the runs' k-of-n rule, against far_per_h (exact Poisson interval)")
+
+
+def _verdict(ci: Sequence[float], target: float) -> str:
+    """The (dispersion-scaled) interval against the target, as :func:`rate_verdict` words it."""
+    return "above" if ci[0] > target else "below" if ci[1] < target else "contains"
 
 
 def _rate(c: int, expo_h: float, runs: int, target: float, confidence: float) -> HeldRate:
     lo, hi = poisson_rate_interval(c, expo_h, confidence)
     return HeldRate(int(runs), int(c), float(expo_h), c / expo_h if expo_h > 0 else math.nan, (lo, hi),
-                    bool(lo <= target <= hi))
+                    rate_verdict(c, expo_h, target, confidence), detectable_ratio(expo_h, target, confidence))
 
 
 def bank_rate(records: Sequence[Mapping[str, Any]], out_dir: str | Path, scales: Mapping[str, float], target_per_h: float,
@@ -444,9 +452,10 @@ def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, spli
             mem.id, trained * cal.scale, trained, cal.scale, target,
             _rate(cal.false_alarms, cal.exposure_h, cal.runs, target, confidence),
             HeldRate(chk.held_out_runs, chk.false_alarms, chk.exposure_h, chk.far_per_h,
-                     (float(chk.far_per_h_ci[0]), float(chk.far_per_h_ci[1])), chk.target_inside),
+                     (float(chk.far_per_h_ci[0]), float(chk.far_per_h_ci[1])),
+                     _verdict(chk.far_per_h_ci, target), detectable_ratio(chk.exposure_h, target, confidence)),
             cal.method, float(chk.rate_ratio), (float(chk.rate_ratio_ci[0]), float(chk.rate_ratio_ci[1])),
-            bool(chk.consistent)))
+            str(chk.ratio_check)))
     node = design_node(sc)
     bad = [r["index"] for r in done[1:] if design_node(load(out / "runs" / r["scenario"])) != node]
     if bad:
@@ -465,7 +474,7 @@ def format_thresholds(t: StudyThresholds) -> str:
     """A table of a thresholds file: per member its threshold and the two halves' rates."""
     def r(h: HeldRate) -> str:
         return (f"{h.false_alarms:3d} in {h.exposure_h:5.1f} h = {h.far_per_h:6.3g} [{h.ci_per_h[0]:.3g}, "
-                f"{h.ci_per_h[1]:.3g}]{'' if h.target_inside else ' (target outside)'}")
+                f"{h.ci_per_h[1]:.3g}] {h.verdict}, sees {h.detectable_ratio:.2g} x")
 
     lines = [f"calibration study {t.study} ({t.study_identity}): {t.runs} runs, {t.flight_h:.1f} h, {t.aircraft} bank at "
              f"h {t.design_h_ft:g} ft, vc {t.design_vc_kts:g} kt, {t.design_turbulence} turbulence; target "
@@ -475,6 +484,14 @@ def format_thresholds(t: StudyThresholds) -> str:
     for m in t.members:
         lines.append(f"{m.id:26} {m.trained_threshold:10.4g} {m.threshold:10.4g} {m.scale:6.3f}  "
                      f"{r(m.calibration):34}  {r(m.held_out)}; ratio to the calibration half "
-                     f"[{m.rate_ratio_ci[0]:.3g}, {m.rate_ratio_ci[1]:.3g}]{'' if m.consistent else ' (INCONSISTENT)'}")
+                     f"[{m.rate_ratio_ci[0]:.3g}, {m.rate_ratio_ci[1]:.3g}] ({m.ratio_check})")
     lines.append(f"{'bank':26} {'':10} {'':10} {'':6}  {r(t.bank_calibration):34}  {r(t.bank_held_out)}")
+    v = t.validation
+    if v is None:
+        lines.append("validation: none yet (fly a fresh study with --validate)")
+    else:
+        lines.append(f"validation on {v.study} ({v.study_identity}, seed {v.seed}): {v.runs} runs, {v.flight_h:.1f} h")
+        for m in v.members:
+            lines.append(f"{m.id:26} target {m.target_per_h:.3g}: {r(m.rate)}")
+        lines.append(f"{'bank':26} target {t.far_per_h:.3g}: {r(v.bank)}")
     return "\n".join(lines)

@@ -23,6 +23,10 @@ def add_parser(sub: Any) -> None:
     s.add_argument("--calibrate", default=None, metavar="OUT.toml",
                    help="after flying, calibrate each member's threshold to the bank's rate on half of the runs, check "
                    "it on the other half and write a thresholds file ([fdi] thresholds = \"OUT.toml\"; docs/study.md)")
+    s.add_argument("--validate", default=None, nargs="?", const="", metavar="FILE.toml",
+                   help="after flying, check the thresholds file the runs flew (or FILE.toml) on this fresh study "
+                   "and write the result into the file's [validation] table (a study whose seed is in a validation "
+                   "set of fdi_sim/seeds.py; docs/study.md)")
     s.add_argument("--target-per-h", type=float, default=None,
                    help="with --calibrate: the bank's target rate [1/flight hour] (default: the runs' far_per_h)")
     s.set_defaults(func=cmd_study)
@@ -82,6 +86,19 @@ def cmd_study(args: argparse.Namespace) -> int:
         write_thresholds(t, args.calibrate)
         print(format_thresholds(t), file=sys.stderr if args.json else sys.stdout)
         print(f"thresholds {args.calibrate}", file=sys.stderr)
+    if args.validate is not None:
+        from fdi_sim.bank.thresholds_file import write_thresholds
+        from fdi_sim.study.calibration import format_thresholds
+        from fdi_sim.study.validation import validate_study
+        from fdi_sim.training.thresholds import thresholds_source
+        from fdi_sim.scenario import load
+
+        target = Path(args.validate) if args.validate else \
+            thresholds_source(load(out / "runs" / recs[0]["scenario"]))[0]
+        t = validate_study(out, target)
+        write_thresholds(t, target)
+        print(format_thresholds(t), file=sys.stderr if args.json else sys.stdout)
+        print(f"validated  {target}", file=sys.stderr)
     return 0
 
 

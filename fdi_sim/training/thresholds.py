@@ -175,6 +175,7 @@ def _cache_path(key: str) -> Path:
 
 
 def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
+    from fdi_sim.decision.tail import TAIL_METHOD
     from fdi_sim.detectors.stream import stream_design_key
     from fdi_sim.training.flights import fault_free
 
@@ -188,7 +189,7 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
         h.update(mem.id.encode())
         h.update(stream_design_key(mem.stream))
     blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "confidence": THRESHOLD_CONFIDENCE, "n": f.calibration_flights, "T": f.calibration_duration_s,
-                       "decision": [f.persistence_k, f.persistence_n], "method": "episodes-v5", "version": __version__, "members": h.hexdigest()},
+                       "decision": [f.persistence_k, f.persistence_n], "method": f"episodes-v5-{TAIL_METHOD}", "version": __version__, "members": h.hexdigest()},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 

@@ -85,7 +85,12 @@ def test_calibrated_thresholds_meet_the_target_on_their_half_and_are_rescored_on
         # the calibration half's count at the threshold is what the direct rule gives there
         assert int(rescore(even, out, [m.scale]).detectors[m.id].false_alarms[0]) == m.calibration.false_alarms
         assert m.calibration.runs == len(even) and m.held_out.runs == len(odd)
-        assert m.method and m.consistent == (m.rate_ratio_ci[0] <= 1.0 <= m.rate_ratio_ci[1])
+        assert m.method
+        if m.calibration.false_alarms == m.held_out.false_alarms == 0:  # a check that cannot say no
+            assert m.ratio_check == "undetermined"
+        else:
+            assert (m.ratio_check == "consistent") == (m.rate_ratio_ci[0] <= 1.0 <= m.rate_ratio_ci[1])
+        assert m.held_out.detectable_ratio > 1.0
         rs = rescore(odd, out, [m.scale]).detectors[m.id]  # the held-out count by the direct rule
         assert int(rs.false_alarms[0]) == m.held_out.false_alarms
         lo, hi = m.held_out.ci_per_h

@@ -327,7 +327,7 @@ def test_threshold_calibrated_on_half_gives_the_target_on_the_other_half(dhc6, d
           f"[{chk.rate_ratio_ci[0]:.2f}, {chk.rate_ratio_ci[1]:.2f}]")
     assert chk.calibration_false_alarms <= target * chk.calibration.exposure_h  # the calibration met its target
     assert chk.calibration_false_alarms >= 0.5 * target * chk.calibration.exposure_h  # and rests on alarms
-    assert chk.consistent, chk
+    assert chk.ratio_check == "consistent", chk
 
 
 @pytest.mark.parametrize("detector", ["kalman-gust-v1", "kinematic-attitude-v1"])
@@ -350,4 +350,4 @@ def test_tail_calibration_on_half_is_not_beaten_on_the_other_half(dhc6, detector
     assert cal.method.startswith("episode tail") and "GPD" in cal.method  # extrapolated, not the count
     assert chk.calibration_false_alarms == cal.false_alarms  # the check counts what the calibration counted
     assert chk.far_per_h_ci[0] <= target, chk
-    assert chk.consistent, chk
+    assert chk.ratio_check == "consistent", chk
