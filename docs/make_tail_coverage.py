@@ -131,9 +131,9 @@ def main() -> int:
     p.add_argument("--trials", type=int, default=200)
     p.add_argument("--workers", type=int, default=2)
     a = p.parse_args()
-    data = measure(a.trials, a.workers)
     command = "python docs/make_tail_coverage.py" + ("" if a.trials == 200 else f" --trials {a.trials}")
-    stamp = make_stamp("tail-coverage", command, INPUTS)
+    stamp = make_stamp("tail-coverage", command, INPUTS)  # the code as the numbers are made (not after)
+    data = measure(a.trials, a.workers)
     data["stamp"] = stamp.__dict__ | {"inputs": list(stamp.inputs)}
     CARD.write_text(json.dumps(data, indent=1) + "\n")
     text = MD.read_text() if MD.exists() else ""
