@@ -93,6 +93,10 @@ REGISTRY: tuple[SeedSet, ...] = (
     SeedSet("envelope-hold-out", "hold-out", (15001, 15002),
             ("studies/f16_envelope_hold_out", "studies/dhc6_envelope_hold_out"),
             "fault-free studies across each aircraft's envelope, light to severe turbulence (issue 24's bar)"),
+    SeedSet("test-calibration", "calibration", (21,), ("tests/study/test_calibration.py",),
+            "the small DHC-6 calibration study of the thresholds-file tests (mechanics, not a verdict)"),
+    SeedSet("test-validation", "validation", (24,), ("tests/study/test_calibration.py",),
+            "the small fresh study that validates that file in the same tests (mechanics, not a verdict)"),
     SeedSet("tail-coverage", "synthetic", (20261204,), ("docs/make_tail_coverage.py",),
             "synthetic AR(1) statistics of the tail method's coverage table"),
 )

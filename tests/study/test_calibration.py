@@ -278,3 +278,41 @@ def test_a_default_shipped_source_that_does_not_cover_the_bank_says_so_in_the_lo
     cal = json.loads(read_log(res.log_path).metadata["fdi"]["calibration"])
     assert cal["source"] == "trained" and "does not cover this bank's design" in cal["note"]
     assert [m["threshold"] for m in cal["members"]] == [m.trained_threshold for m in read_thresholds(thr).members]
+
+
+VALIDATION = STUDY.replace('name = "t_dhc6_cal"', 'name = "t_dhc6_val"').replace("seed = 21", "seed = 24") \
+    .replace("runs = 40", "runs = 12")
+
+
+def test_a_fresh_study_validates_the_file_and_writes_it_in(study, tmp_path: Path) -> None:
+    """``--validate``: a fresh study (seed 24, the registry's test-validation set) flown with the
+    file; each member's and the bank's count on it is the direct rule's at the file's thresholds,
+    with a verdict and the ratio those hours could detect, written into the file's
+    [validation] table; the calibration study itself is refused (its seed is a calibration seed)."""
+    from fdi_sim.bank.thresholds_file import read_thresholds
+    from fdi_sim.errors import StudyError
+    from fdi_sim.study.execute import load_records
+    from fdi_sim.study.rescore import rescore
+    from fdi_sim.study.validation import validate_study
+
+    out, thr, _, tmp = study
+    mine = tmp_path / "thresholds.toml"
+    mine.write_text(thr.read_text())
+    (tmp_path / "val.toml").write_text(VALIDATION.replace('thresholds = "trained"', f'thresholds = "{mine}"'))
+    env = {**__import__("os").environ}
+    p = subprocess.run([sys.executable, "-m", "fdi_sim.cli", "study", str(tmp_path / "val.toml"), "--out",
+                        str(tmp_path / "val"), "--workers", "2", "--quiet", "--no-report", "--validate"],
+                       capture_output=True, text=True, env=env, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    t = read_thresholds(mine)
+    v = t.validation
+    assert v is not None and (v.study, v.seed, v.runs) == ("t_dhc6_val", 24, 12)
+    recs = load_records(tmp_path / "val")
+    for m, mt in zip(v.members, t.members):
+        assert m.id == mt.id
+        assert m.rate.false_alarms == int(rescore(recs, tmp_path / "val", [1.0]).detectors[m.id].false_alarms[0])
+        assert m.rate.verdict in ("contains", "below", "above") and m.rate.detectable_ratio > 1.0
+    assert "validation on t_dhc6_val" in p.stdout
+    assert read_thresholds(thr).validation is None  # the study's own file untouched
+    with pytest.raises(StudyError, match="calibration set"):
+        validate_study(out, thr)
