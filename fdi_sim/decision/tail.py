@@ -137,7 +137,7 @@ MIN_EPISODES = 30
 #: alarm episodes an empirical episode threshold needs
 MIN_EMPIRICAL_EPISODES = 10
 #: the tail method's version, in every cache key of thresholds it sets (a change refits them)
-TAIL_METHOD = "clusters-v1"
+TAIL_METHOD = "clusters-v2"
 #: 95 % point of the 50:50 mixture of chi-square(0) and chi-square(1) (the deviance of a shape on
 #: its boundary xi = 0): a fitted positive shape this much more likely than xi = 0 is kept
 HEAVY_DEVIANCE = 2.706
@@ -276,33 +276,35 @@ class _Counter:
 
 
 def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hours: float,
-                      weights: NDArray[np.int64] | None = None) -> tuple[float, str]:
+                      weights: NDArray[np.int64] | None = None, power: float | None = None) -> tuple[float, str]:
     """The level whose upcrossings (alarm episodes) occur ``rate_per_h`` times per flight hour.
 
-    Peaks over threshold on *declustered* data (Coles 2001, sec. 5.3.2, runs declustering with run
-    length 1, which is how the bank counts alarm episodes): at a level ``u`` with about
-    :data:`TAIL_EPISODES` episodes in the training flights, ``lambda_u`` episodes per hour, the
-    excess of each episode's peak over ``u`` is generalized Pareto (Coles eq. 4.2), so episodes
-    above ``x`` come at ``lambda_u (1 + xi (x - u) / sigma)^(-1/xi)`` per hour; the threshold solves
-    that for ``rate_per_h``. Unlike per-sample exceedances (:func:`tail_threshold`), the peaks are
-    nearly independent: a statistic correlated over tens of samples (the airspeed check's 10 s mean
-    of the longitudinal gust) puts hundreds of exceedances per excursion into a per-sample fit,
-    whose shape then describes the top of a few smooth bumps, not the tail (DHC-6 approach, 24 x
-    300 s: xi -0.44, a fitted endpoint 2.6 kt above the 0.993 quantile, a threshold of 14.0 kt, 3.3
-    standard deviations of the residual, exceeded in a held-out flight by a 10 s mean gust of
-    12.7 kt).
+    Peaks over threshold on declustered data (Coles 2001, sec. 5.3.2): at a level ``u`` with
+    about :data:`TAIL_EPISODES` episodes in the training flights, the exceedances are grouped into
+    independent clusters (:func:`_run_length`, the intervals estimator of the extremal index), the
+    excess of each cluster's peak over ``u`` is generalized Pareto (Coles eq. 4.2), so clusters
+    above ``x`` come at ``lambda_u (1 + xi (x - u) / sigma)^(-1/xi)`` per hour, times the episodes
+    per cluster at the highest levels (``split``: a statistic that chatters about a level starts
+    several alarm episodes in one excursion); the threshold solves that for ``rate_per_h``. Unlike
+    per-sample exceedances (:func:`tail_threshold`), the peaks are nearly independent: a statistic
+    correlated over tens of samples (the airspeed check's 10 s mean of the longitudinal gust) puts
+    hundreds of exceedances per excursion into a per-sample fit, whose shape then describes the
+    top of a few smooth bumps, not the tail (DHC-6 approach, 24 x 300 s: xi -0.44, a fitted
+    endpoint 2.6 kt above the 0.993 quantile, a threshold of 14.0 kt, 3.3 standard deviations of
+    the residual, exceeded in a held-out flight by a 10 s mean gust of 12.7 kt).
 
-    The tail is exponential (``xi = 0``) unless a heavier one is significant: the bank's statistics
-    (means of Gaussian residuals, chi-square forms) lie in the Gumbel domain, so a fitted shape on a
-    hundred peaks is mostly the sampling noise of a finite level. A negative one would cap the
-    threshold at the fitted endpoint; a positive one is kept only where its deviance against the
-    exponential exceeds the chi-square(1) 95 % point (the gust filter's, xi 0.4-0.7, is: its
-    residual mismatch in turbulence is heavy-tailed). The fit is made on the statistic or on its
-    square, whichever has the fitted shape nearer 0 (a Gaussian mean's upcrossings fall as
-    ``exp(-x^2 / 2 s^2)``, Rice's formula: exponential in ``x^2``). An episode at a higher level
-    can split into several upcrossings (a statistic that chatters about the threshold); the rate is scaled by the largest
-    ratio of upcrossings to peaks at the levels of the 10th, 20th, ... largest peak (1 when none
-    split).
+    The tail is exponential (``xi = 0``) unless a heavier one is significant (:func:`_choose_tail`):
+    the bank's statistics (means of Gaussian residuals, chi-square forms) lie in the Gumbel
+    domain, so a fitted shape on a hundred peaks is mostly the sampling noise of a finite level. A
+    negative one would cap the threshold at the fitted endpoint; a positive one is kept only where
+    significant (the gust filter's, xi 0.2-0.7, is: its residual mismatch in turbulence is
+    heavy-tailed). The exponential is in the statistic (``power = 1``: a chi-square form's
+    upcrossings fall as ``exp(-x / 2)``) or in its square (``power = 2``: a Gaussian mean's fall
+    as ``exp(-x^2 / 2 s^2)``, Rice's formula). A member that knows the form of its statistic says
+    so (its stream's ``tail_power``), and no choice is made; otherwise the two compete on
+    likelihood. A target more than :data:`MAX_EXTRAPOLATION` times below the fitted level's rate is
+    refused: the coverage of the method's bound was measured up to there
+    (``docs/make_tail_coverage.py``).
 
     Parameters
     ----------
@@ -314,6 +316,9 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
         Armed flight hours the series cover (with their weights).
     weights : NDArray, optional
         How many times each flight counts (a bootstrap resample); all 1 by default.
+    power : float, optional
+        The scale of the exponential tail when the statistic's form is known (2: a mean of
+        Gaussian residuals, 1: a quadratic form); None: chosen from the data.
 
     Returns
     -------
@@ -326,11 +331,11 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
     """
     pool = _Pool([_Crossings(m) for m in flights])
     w = np.ones(len(pool.cs), dtype=np.int64) if weights is None else np.asarray(weights, dtype=np.int64)
-    return _episode_fit(pool, w, rate_per_h, hours)[:2]
+    return _episode_fit(pool, w, rate_per_h, hours, power)[:2]
 
 
-def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float,
-                 hours: float) -> tuple[float, str, float, bool]:
+def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float, hours: float,
+                 power: float | None = None) -> tuple[float, str, float, bool]:
     """:func:`episode_threshold` on the flights of ``pool`` counted ``w`` times each, and the scale
     (``power``) and tail (``heavy``) it chose (every bootstrap resample chooses again)."""
     if not (rate_per_h > 0.0 and math.isfinite(rate_per_h)):
@@ -371,7 +376,7 @@ def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float,
         i = int(math.floor(want / split))  # the level with that many peaks above it
         return float(top[i]), (f"empirical: {i} of {peaks.size} cluster peaks above it in {hours:.2f} h "
                                 f"(split {split:.2f})"), 1.0, False
-    xi, sigma, pw, heavy, how = _choose_tail(peaks, u)
+    xi, sigma, pw, heavy, how = _choose_tail(peaks, u, power)
     lam = peaks.size * split / hours
     at_u = counter.count(u) / hours  # episodes per hour at the fitted level: the extrapolation's start
     if at_u / rate_per_h > MAX_EXTRAPOLATION:
@@ -417,7 +422,8 @@ def _gpd_fit(z: NDArray[np.float64]) -> tuple[float, float, float]:
     return xi, xi / t, -float(best.fun)
 
 
-def _choose_tail(peaks: NDArray[np.float64], u: float) -> tuple[float, float, float, bool, str]:
+def _choose_tail(peaks: NDArray[np.float64], u: float,
+                 power: float | None = None) -> tuple[float, float, float, bool, str]:
     """The tail of the episode peaks above ``u``: ``(xi, sigma, power, heavy, text)``.
 
     Two light tails compete on the likelihood of the same peaks (both one parameter, so no
@@ -431,7 +437,11 @@ def _choose_tail(peaks: NDArray[np.float64], u: float) -> tuple[float, float, fl
     repeats it on every bootstrap resample, so its bound carries the selection's variability.
     """
     best = None
-    for pw in (1.0, 2.0) if u > 0.0 else (1.0,):
+    if power is not None and power not in (1.0, 2.0):
+        raise DesignError(f"tail power must be 1 or 2, got {power}")
+    if power == 2.0 and u <= 0.0:  # a square is not monotone below 0: choose from the data
+        power = None
+    for pw in ((1.0, 2.0) if u > 0.0 else (1.0,)) if power is None else (float(power),):
         with np.errstate(over="ignore"):
             z = peaks ** pw - u ** pw
         if not np.isfinite(z).all() or not (z > 0.0).any():
@@ -440,7 +450,7 @@ def _choose_tail(peaks: NDArray[np.float64], u: float) -> tuple[float, float, fl
         s = float(z.mean())
         # log-likelihood of the peaks on the statistic's scale: exponential density of z times dz/dx
         ll = -z.size * math.log(s) - z.size + (0.0 if pw == 1.0 else float(np.sum(np.log(pw * peaks ** (pw - 1.0)))))
-        ll -= 0.0 if pw == 1.0 else SCALE_MARGIN  # the lighter tail must win by a margin
+        ll -= 0.0 if pw == 1.0 or power is not None else SCALE_MARGIN  # the lighter tail must win by a margin
         if best is None or ll > best[0]:
             best = (ll, pw, z)
     if best is None:
@@ -449,14 +459,15 @@ def _choose_tail(peaks: NDArray[np.float64], u: float) -> tuple[float, float, fl
     xi, sigma, ll_gpd = _gpd_fit(z)
     s = float(z.mean())
     deviance = 2.0 * (ll_gpd - (-z.size * math.log(s) - z.size))
+    form = "" if power is None else ", the statistic's form given"
     if xi > 0.0 and deviance > HEAVY_DEVIANCE:
-        return xi, sigma, pw, True, f"xi {xi:.3f}, deviance {deviance:.2f}"
-    return 0.0, s, pw, False, f"xi 0 (MLE {xi:.3f}, deviance {deviance:.2f})"
+        return xi, sigma, pw, True, f"xi {xi:.3f}, deviance {deviance:.2f}{form}"
+    return 0.0, s, pw, False, f"xi 0 (MLE {xi:.3f}, deviance {deviance:.2f}){form}"
 
 
 def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hours: Sequence[float],
                                 rng: np.random.Generator, level: float = 0.95,
-                                n_boot: int = 200) -> tuple[float, str]:
+                                n_boot: int = 200, power: float | None = None) -> tuple[float, str]:
     """:func:`episode_threshold` at its ``level`` bootstrap bound over whole flights (as
     :func:`confident_tail_threshold`, whose reasons apply: a flight's episodes share its turbulence).
 
@@ -474,6 +485,8 @@ def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per
         Confidence, in (0, 1).
     n_boot : int
         Bootstrap resamples.
+    power : float, optional
+        As :func:`episode_threshold`'s (the same in every resample).
 
     Returns
     -------
@@ -486,12 +499,12 @@ def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per
     if len(pool.cs) < 2:
         raise DesignError("a confident threshold needs at least two training flights")
     k = len(pool.cs)
-    point, how, _, _ = _episode_fit(pool, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()))
+    point, how, _, _ = _episode_fit(pool, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()), power)
     boot, heavy = [], 0
     for _ in range(n_boot):
         w = np.bincount(rng.integers(0, k, k), minlength=k)
         try:
-            thr, _, _, is_heavy = _episode_fit(pool, w, rate_per_h, float(w @ h))
+            thr, _, _, is_heavy = _episode_fit(pool, w, rate_per_h, float(w @ h), power)
             boot.append(thr)
             heavy += is_heavy
         except DesignError:

@@ -246,6 +246,9 @@ class GustKalmanStream:
     #: a model (not independent), and isolates by fault direction (the cosine)
     independent = False
     fault_directions = True
+    #: the statistic's form, for the threshold's tail (fdi_sim.decision.tail.episode_threshold): a
+    #: windowed quadratic form of the innovations (chi-square-like), exponential in the statistic
+    tail_power = 1.0
 
     @property
     def n_outputs(self) -> int:

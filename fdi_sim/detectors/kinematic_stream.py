@@ -504,6 +504,10 @@ class KinematicStream:
     estimate_names: tuple[str, ...] = ()
     #: a residual per sensor, no fault direction (the angle-magnitude rule cannot use it)
     fault_directions = False
+    #: the statistic's form, for the threshold's tail (fdi_sim.decision.tail.episode_threshold):
+    #: max |r_i| / scale_i of residuals that are windowed linear functions of Gaussian sensor noise
+    #: and turbulence, whose upcrossings fall as exp(-x^2 / 2 s^2) (Rice): exponential in x^2
+    tail_power = 2.0
 
     @property
     def residual_names(self) -> tuple[str, ...]:

@@ -257,7 +257,8 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                 if episodes:
                     try:
                         thr, method = confident_episode_threshold(series[i], rate, hours[i], rng,
-                                                                  level=THRESHOLD_CONFIDENCE)
+                                                                  level=THRESHOLD_CONFIDENCE,
+                                                                  power=getattr(mem.stream, "tail_power", None))
                     except DesignError as e:  # short training flights: too few episodes to fit
                         thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
                         method = f"per-sample ({e}): {method}"
