@@ -177,7 +177,12 @@ def test_rescore_over_scales_and_rules(study):
             assert np.all(dl[:, 1:] >= dl[:, :-1])
     bank = rs.detectors[BANK]
     assert bank.false_alarms[0] > 10 * max(1, bank.false_alarms[list(scales).index(scales[-1])])
-    assert bank.false_alarms[-1] == 0
+    # at 20 x its thresholds the bank raises no alarm on the fault-free runs. On a faulty run a
+    # false alarm can *appear* as the threshold rises: an alarm answering the fault's end is
+    # delayed past LATE_GRACE_S and then belongs to no fault (measured: run 7, a p bias ending at
+    # 40 s; the gust filter exceeds 5 x its threshold from 41.35 s, 20 x from 42.2 s)
+    free = [r for r in records if not r["faults"]]
+    assert len(free) >= 6 and R.rescore(free, out, scales[-1:]).detectors[BANK].false_alarms[0] == 0
     # the bank alarms when a member does: never fewer detections than its best member
     for ty, ts in bank.by_type.items():
         best = np.max([d.by_type[ty].detected for i, d in rs.detectors.items() if i != BANK], axis=0)
