@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["SeedSet", "REGISTRY", "seed_set", "seeds", "role_of"]
+__all__ = ["REGISTRY", "SeedSet", "role_of", "seed_set", "seeds"]
 
 ROLES = ("development", "calibration", "validation", "hold-out", "synthetic")
 

@@ -19,16 +19,24 @@ import json
 import re
 import subprocess
 from dataclasses import asdict, dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
-__all__ = ["Stamp", "make_stamp", "inputs_digest", "generated_block", "read_blocks", "stale_blocks",
-           "replace_block", "ROOT"]
+__all__ = [
+    "ROOT",
+    "Stamp",
+    "generated_block",
+    "inputs_digest",
+    "make_stamp",
+    "read_blocks",
+    "replace_block",
+    "stale_blocks",
+]
 
 #: the repository (the parent of the package)
 ROOT = Path(__file__).resolve().parent.parent
 
-_BLOCK = re.compile(r"<!-- generated (\{.*?\}) -->\n(.*?)<!-- end generated -->", re.S)
+_BLOCK = re.compile(r"<!-- generated (\{.*?\}) -->\n(.*?)<!-- end generated -->", re.DOTALL)
 _SKIP = ("__pycache__", ".pyc", ".so", ".egg-info")
 
 
@@ -105,7 +113,7 @@ def make_stamp(block_id: str, command: str, inputs: tuple[str, ...] | list[str],
     except (OSError, subprocess.CalledProcessError):
         commit = "unknown"
     return Stamp(block_id, command, inputs, inputs_digest(inputs, root), __version__, commit,
-                 datetime.now(timezone.utc).strftime("%Y-%m-%d"))
+                 datetime.now(UTC).strftime("%Y-%m-%d"))
 
 
 def generated_block(stamp: Stamp, body: str) -> str:

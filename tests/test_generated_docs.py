@@ -15,7 +15,13 @@ from pathlib import Path
 
 import pytest
 
-from fdi_sim.stamp import inputs_digest, make_stamp, read_blocks, replace_block, stale_blocks
+from fdi_sim.stamp import (
+    inputs_digest,
+    make_stamp,
+    read_blocks,
+    replace_block,
+    stale_blocks,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))

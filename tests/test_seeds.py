@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from fdi_sim.seeds import REGISTRY, ROLES, SeedSet, role_of, seed_set
 from fdi_sim.scenario.shipped import list_studies
+from fdi_sim.seeds import REGISTRY, ROLES, SeedSet, role_of, seed_set
 from fdi_sim.study.spec import load_study
 
 ROOT = Path(__file__).resolve().parents[1]

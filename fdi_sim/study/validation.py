@@ -18,7 +18,13 @@ from dataclasses import replace
 from pathlib import Path
 
 from fdi_sim import __version__
-from fdi_sim.bank.thresholds_file import HeldRate, MemberRate, StudyThresholds, Validation, read_thresholds
+from fdi_sim.bank.thresholds_file import (
+    HeldRate,
+    MemberRate,
+    StudyThresholds,
+    Validation,
+    read_thresholds,
+)
 from fdi_sim.decision.intervals import detectable_ratio, rate_verdict
 from fdi_sim.decision.outcome import LATE_GRACE_S
 from fdi_sim.errors import StudyError

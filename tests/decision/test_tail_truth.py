@@ -7,8 +7,13 @@ import pytest
 from scipy.stats import multivariate_normal, norm
 
 from fdi_sim.decision.tail import MAX_EXTRAPOLATION, confident_episode_threshold
-from fdi_sim.decision.tail_truth import TRANSFORMS, Ar1Statistic, ar1_flights, episode_rate_curve, \
-    simulate_episode_rate
+from fdi_sim.decision.tail_truth import (
+    TRANSFORMS,
+    Ar1Statistic,
+    ar1_flights,
+    episode_rate_curve,
+    simulate_episode_rate,
+)
 from fdi_sim.errors import DesignError
 
 
