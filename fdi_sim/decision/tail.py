@@ -137,7 +137,7 @@ MIN_EPISODES = 30
 #: alarm episodes an empirical episode threshold needs
 MIN_EMPIRICAL_EPISODES = 10
 #: the tail method's version, in every cache key of thresholds it sets (a change refits them)
-TAIL_METHOD = "clusters-v2"
+TAIL_METHOD = "clusters-v3"
 #: 95 % point of the 50:50 mixture of chi-square(0) and chi-square(1) (the deviance of a shape on
 #: its boundary xi = 0): a fitted positive shape this much more likely than xi = 0 is kept
 HEAVY_DEVIANCE = 2.706
@@ -276,7 +276,8 @@ class _Counter:
 
 
 def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hours: float,
-                      weights: NDArray[np.int64] | None = None, power: float | None = None) -> tuple[float, str]:
+                      weights: NDArray[np.int64] | None = None, power: float | None = None,
+                      heavy: bool = True) -> tuple[float, str]:
     """The level whose upcrossings (alarm episodes) occur ``rate_per_h`` times per flight hour.
 
     Peaks over threshold on declustered data (Coles 2001, sec. 5.3.2): at a level ``u`` with
@@ -301,8 +302,8 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
     heavy-tailed). The exponential is in the statistic (``power = 1``: a chi-square form's
     upcrossings fall as ``exp(-x / 2)``) or in its square (``power = 2``: a Gaussian mean's fall
     as ``exp(-x^2 / 2 s^2)``, Rice's formula). A member that knows the form of its statistic says
-    so (its stream's ``tail_power``), and no choice is made; otherwise the two compete on
-    likelihood. A target more than :data:`MAX_EXTRAPOLATION` times below the fitted level's rate is
+    so (its stream's ``tail_power``, and ``tail_heavy = False`` for a statistic known to be
+    light-tailed), and no choice is made; otherwise the two compete on likelihood. A target more than :data:`MAX_EXTRAPOLATION` times below the fitted level's rate is
     refused: the coverage of the method's bound was measured up to there
     (``docs/make_tail_coverage.py``).
 
@@ -319,6 +320,9 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
     power : float, optional
         The scale of the exponential tail when the statistic's form is known (2: a mean of
         Gaussian residuals, 1: a quadratic form); None: chosen from the data.
+    heavy : bool
+        Whether a heavier (generalized Pareto) tail may replace the exponential where its
+        deviance is significant; False for a statistic known to be light-tailed.
 
     Returns
     -------
@@ -331,11 +335,11 @@ def episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float,
     """
     pool = _Pool([_Crossings(m) for m in flights])
     w = np.ones(len(pool.cs), dtype=np.int64) if weights is None else np.asarray(weights, dtype=np.int64)
-    return _episode_fit(pool, w, rate_per_h, hours, power)[:2]
+    return _episode_fit(pool, w, rate_per_h, hours, power, heavy)[:2]
 
 
 def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float, hours: float,
-                 power: float | None = None) -> tuple[float, str, float, bool]:
+                 power: float | None = None, heavy: bool = True) -> tuple[float, str, float, bool]:
     """:func:`episode_threshold` on the flights of ``pool`` counted ``w`` times each, and the scale
     (``power``) and tail (``heavy``) it chose (every bootstrap resample chooses again)."""
     if not (rate_per_h > 0.0 and math.isfinite(rate_per_h)):
@@ -376,7 +380,7 @@ def _episode_fit(pool: _Pool, w: NDArray[np.int64], rate_per_h: float, hours: fl
         i = int(math.floor(want / split))  # the level with that many peaks above it
         return float(top[i]), (f"empirical: {i} of {peaks.size} cluster peaks above it in {hours:.2f} h "
                                 f"(split {split:.2f})"), 1.0, False
-    xi, sigma, pw, heavy, how = _choose_tail(peaks, u, power)
+    xi, sigma, pw, heavy, how = _choose_tail(peaks, u, power, heavy)
     lam = peaks.size * split / hours
     at_u = counter.count(u) / hours  # episodes per hour at the fitted level: the extrapolation's start
     if at_u / rate_per_h > MAX_EXTRAPOLATION:
@@ -422,8 +426,8 @@ def _gpd_fit(z: NDArray[np.float64]) -> tuple[float, float, float]:
     return xi, xi / t, -float(best.fun)
 
 
-def _choose_tail(peaks: NDArray[np.float64], u: float,
-                 power: float | None = None) -> tuple[float, float, float, bool, str]:
+def _choose_tail(peaks: NDArray[np.float64], u: float, power: float | None = None,
+                 allow_heavy: bool = True) -> tuple[float, float, float, bool, str]:
     """The tail of the episode peaks above ``u``: ``(xi, sigma, power, heavy, text)``.
 
     Two light tails compete on the likelihood of the same peaks (both one parameter, so no
@@ -459,15 +463,16 @@ def _choose_tail(peaks: NDArray[np.float64], u: float,
     xi, sigma, ll_gpd = _gpd_fit(z)
     s = float(z.mean())
     deviance = 2.0 * (ll_gpd - (-z.size * math.log(s) - z.size))
-    form = "" if power is None else ", the statistic's form given"
-    if xi > 0.0 and deviance > HEAVY_DEVIANCE:
+    form = "" if power is None else ", the statistic's form given" + ("" if allow_heavy else " (light-tailed)")
+    if allow_heavy and xi > 0.0 and deviance > HEAVY_DEVIANCE:
         return xi, sigma, pw, True, f"xi {xi:.3f}, deviance {deviance:.2f}{form}"
     return 0.0, s, pw, False, f"xi 0 (MLE {xi:.3f}, deviance {deviance:.2f}){form}"
 
 
 def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per_h: float, hours: Sequence[float],
                                 rng: np.random.Generator, level: float = 0.95,
-                                n_boot: int = 200, power: float | None = None) -> tuple[float, str]:
+                                n_boot: int = 200, power: float | None = None,
+                                heavy: bool = True) -> tuple[float, str]:
     """:func:`episode_threshold` at its ``level`` bootstrap bound over whole flights (as
     :func:`confident_tail_threshold`, whose reasons apply: a flight's episodes share its turbulence).
 
@@ -485,7 +490,7 @@ def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per
         Confidence, in (0, 1).
     n_boot : int
         Bootstrap resamples.
-    power : float, optional
+    power, heavy
         As :func:`episode_threshold`'s (the same in every resample).
 
     Returns
@@ -499,17 +504,17 @@ def confident_episode_threshold(flights: Sequence[NDArray[np.float64]], rate_per
     if len(pool.cs) < 2:
         raise DesignError("a confident threshold needs at least two training flights")
     k = len(pool.cs)
-    point, how, _, _ = _episode_fit(pool, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()), power)
-    boot, heavy = [], 0
+    point, how, _, _ = _episode_fit(pool, np.ones(k, dtype=np.int64), rate_per_h, float(h.sum()), power, heavy)
+    boot, n_heavy = [], 0
     for _ in range(n_boot):
         w = np.bincount(rng.integers(0, k, k), minlength=k)
         try:
-            thr, _, _, is_heavy = _episode_fit(pool, w, rate_per_h, float(w @ h), power)
+            thr, _, _, is_heavy = _episode_fit(pool, w, rate_per_h, float(w @ h), power, heavy)
             boot.append(thr)
-            heavy += is_heavy
+            n_heavy += is_heavy
         except DesignError:
             continue  # a resample with too few episodes says nothing about the bound
     if len(boot) < n_boot // 2:
         raise DesignError(f"only {len(boot)} of {n_boot} bootstrap resamples could be fitted; fly more or longer "
                           "calibration flights")
-    return _bound(point, f"{how} (a heavy tail in {heavy} of {len(boot)} resamples)", boot, level, k)
+    return _bound(point, f"{how} (a heavy tail in {n_heavy} of {len(boot)} resamples)", boot, level, k)

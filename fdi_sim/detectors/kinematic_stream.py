@@ -508,6 +508,9 @@ class KinematicStream:
     #: max |r_i| / scale_i of residuals that are windowed linear functions of Gaussian sensor noise
     #: and turbulence, whose upcrossings fall as exp(-x^2 / 2 s^2) (Rice): exponential in x^2
     tail_power = 2.0
+    #: ... and light-tailed (no heavier tail is fitted: the residuals are kinematic relations
+    #: between sensors, no aerodynamic model whose mismatch could fatten them); the studies check it
+    tail_heavy = False
 
     @property
     def residual_names(self) -> tuple[str, ...]:

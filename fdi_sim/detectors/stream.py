@@ -20,10 +20,12 @@ Contract (checked for every registered detector by :func:`fdi_sim.detectors.chec
 - *thresholds in and out through* :attr:`StreamingDetector.threshold` and
   :meth:`StreamingDetector.set_threshold` (the bank's one calibration rule sets every member's).
 
-One optional attribute: ``tail_power`` (1.0 or 2.0), the form of the statistic, which the
+Two optional attributes: ``tail_power`` (1.0 or 2.0), the form of the statistic, which the
 threshold's tail fit then takes as given instead of choosing it from the training data (2: a
-mean of Gaussian residuals, exponential in ``x^2``; 1: a quadratic form, exponential in ``x``;
-:func:`fdi_sim.decision.tail.episode_threshold`). A member without it gets the data's choice.
+mean of Gaussian residuals, exponential in ``x^2``; 1: a quadratic form, exponential in ``x``),
+and ``tail_heavy`` (default True: a heavier tail may replace the exponential where significant;
+False: the statistic is known to be light-tailed) (:func:`fdi_sim.decision.tail.episode_threshold`).
+A member without them gets the data's choice.
 
 Values are absolute (the detector subtracts its own trim), in the order of the detector's
 ``input_names`` (the bank's logged commands) and ``output_names`` (the bank's logged

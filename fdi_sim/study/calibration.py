@@ -163,7 +163,7 @@ def calibrate_threshold(records: Sequence[Mapping[str, Any]], out_dir: str | Pat
 def tail_calibrate_threshold(records: Sequence[Mapping[str, Any]], out_dir: str | Path, detector: str,
                              target_per_h: float, rng: np.random.Generator, *, level: float = 0.95,
                              k: int | None = None, n: int | None = None, grace_s: float = LATE_GRACE_S,
-                             power: float | None = None) -> Calibration:
+                             power: float | None = None, heavy: bool = True) -> Calibration:
     """The threshold scale at which ``detector``'s alarm *episodes* on these runs come at
     ``target_per_h``, from the tail of their peaks (:func:`fdi_sim.decision.tail.confident_episode_threshold`
     at its ``level`` bootstrap bound over whole runs), the method the bank's trained thresholds use.
@@ -187,9 +187,9 @@ def tail_calibrate_threshold(records: Sequence[Mapping[str, Any]], out_dir: str 
         The bootstrap's resampling.
     level : float
         Confidence of the bound.
-    power : float, optional
-        The form of the member's statistic (its stream's ``tail_power``; None: chosen from the
-        data), :func:`fdi_sim.decision.tail.episode_threshold`.
+    power, heavy
+        The form of the member's statistic (its stream's ``tail_power``, None: chosen from the
+        data; ``tail_heavy``), :func:`fdi_sim.decision.tail.episode_threshold`.
     """
     from fdi_sim.decision.tail import confident_episode_threshold
     from fdi_sim.errors import DesignError
@@ -208,7 +208,8 @@ def tail_calibrate_threshold(records: Sequence[Mapping[str, Any]], out_dir: str 
         raise StudyError(str(out_dir), detector, f"no completed run with a log has {detector!r}",
                          "name a member of the study's bank")
     try:
-        s_star, how = confident_episode_threshold(series, target_per_h, hours, rng, level=level, power=power)
+        s_star, how = confident_episode_threshold(series, target_per_h, hours, rng, level=level, power=power,
+                                                  heavy=heavy)
     except DesignError as exc:
         cal = calibrate_threshold(records, out_dir, detector, target_per_h, k=k, n=n, grace_s=grace_s)
         return replace(cal, method=f"count (too few episodes for a tail fit: {exc}): {CALIBRATION_METHOD}")
@@ -449,7 +450,8 @@ def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, spli
                              "study, or fly it again")
         target = far / n_m
         cal = tail_calibrate_threshold(fit, out, mem.id, target, rng, level=THRESHOLD_CONFIDENCE,
-                                       power=getattr(mem.stream, "tail_power", None))
+                                       power=getattr(mem.stream, "tail_power", None),
+                                       heavy=getattr(mem.stream, "tail_heavy", True))
         chk = check_calibration(done, out, mem.id, target, split, confidence=confidence, calibration=cal)
         scales[mem.id] = cal.scale
         members.append(StudyMemberThreshold(

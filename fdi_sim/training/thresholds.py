@@ -258,7 +258,8 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                     try:
                         thr, method = confident_episode_threshold(series[i], rate, hours[i], rng,
                                                                   level=THRESHOLD_CONFIDENCE,
-                                                                  power=getattr(mem.stream, "tail_power", None))
+                                                                  power=getattr(mem.stream, "tail_power", None),
+                                                                  heavy=getattr(mem.stream, "tail_heavy", True))
                     except DesignError as e:  # short training flights: too few episodes to fit
                         thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
                         method = f"per-sample ({e}): {method}"
