@@ -52,18 +52,30 @@ def test_every_transform_has_the_episodes_of_abs_x(transform):
         assert stat.level(float(stat.statistic(np.array([u]))[0])) == pytest.approx(u, abs=1e-9)
 
 
-def test_the_bound_covers_a_gaussian_statistic_at_2500x():
+LIGHT_XFAIL = pytest.mark.xfail(strict=True, reason=(
+    "the form the kinematic checks give (x^2, light-tailed) covers about 0.92 at 2,500 x, not the 95 % "
+    "promised nor 36 of these 40: 33 of 40 here, 162 of 180 on seeds [77, 0..179], 188 of 200 in "
+    "docs/tail_coverage.md; probably the exponential in x^2 is a little too light at the fitted level (Rice's "
+    "polynomial factor), a bias the bootstrap cannot see"))
+
+
+@pytest.mark.parametrize("power, heavy", [(None, True), pytest.param(2.0, False, marks=LIGHT_XFAIL)],
+                         ids=["form-chosen", "form-given-light"])
+def test_the_bound_covers_a_gaussian_statistic_at_2500x(power, heavy):
     """The issue's bar: 24 x 300 s of a Gaussian AR(1) statistic (10 s correlation, 3-of-5), the
     target 0.02 per h (2,500 x beyond the fitted level's 50 per h): the share of 40 trials whose
-    bound's exact rate meets the target is at least 0.9 (the full table, 200 trials a row:
+    bound's exact rate meets the target is at least 0.9, with the tail's form chosen from the data
+    and given as the kinematic checks give it (the full table, 200 trials a row:
     docs/tail_coverage.md)."""
     stat = Ar1Statistic()
     curve = episode_rate_curve(stat, np.linspace(2.0, 7.0, 51))
     covered = 0
     for t in range(40):
         rng = np.random.default_rng([77, t])
-        thr, _ = confident_episode_threshold(ar1_flights(stat, 24, 300.0, rng), 0.02, [300.0 / 3600.0] * 24, rng)
+        thr, _ = confident_episode_threshold(ar1_flights(stat, 24, 300.0, rng), 0.02, [300.0 / 3600.0] * 24, rng,
+                                             power=power, heavy=heavy)
         covered += curve.rate_per_h(thr) <= 0.02
+    print(f"form {power}, heavy {heavy}: {covered} of 40 covered")
     assert covered >= 36, covered
 
 
