@@ -41,8 +41,13 @@ def rate_verdict(k: int, exposure_h: float, target_per_h: float, level: float = 
     events is worth, :func:`detectable_ratio` says."""
     if not exposure_h > 0.0:
         return "undetermined"
-    lo, hi = poisson_rate_interval(k, exposure_h, level)
-    return "above" if lo > target_per_h else "below" if hi < target_per_h else "contains"
+    return interval_verdict(poisson_rate_interval(k, exposure_h, level), target_per_h)
+
+
+def interval_verdict(ci_per_h: tuple[float, float] | list[float], target_per_h: float) -> str:
+    """A rate interval [1/h] against a target [1/h]: ``"above"`` (it lies above the target),
+    ``"below"`` or ``"contains"`` (any interval: exact, or scaled for overdispersion)."""
+    return "above" if ci_per_h[0] > target_per_h else "below" if ci_per_h[1] < target_per_h else "contains"
 
 
 def detectable_ratio(exposure_h: float, target_per_h: float, level: float = 0.95, power: float = 0.5) -> float:

@@ -29,7 +29,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from fdi_sim import __version__
-from fdi_sim.decision.intervals import detectable_ratio, poisson_rate_interval, rate_verdict
+from fdi_sim.decision.intervals import detectable_ratio, interval_verdict, poisson_rate_interval, rate_verdict
 from fdi_sim.errors import StudyError
 from fdi_sim.decision.outcome import LATE_GRACE_S
 from fdi_sim.bank.thresholds_file import HeldRate, StudyMemberThreshold, StudyThresholds
@@ -280,6 +280,26 @@ class CalibrationCheck:
     ratio_check: str | None = None
 
 
+def per_run_false_alarms(records: Sequence[Mapping[str, Any]], out_dir: str | Path, detector: str, scale: float,
+                         *, k: int | None = None, n: int | None = None,
+                         grace_s: float = LATE_GRACE_S) -> tuple[int, list[int], list[float]]:
+    """Run by run, ``detector``'s false alarms at ``scale`` x its logged threshold (the direct
+    rule, :func:`rescore`): the runs that have it, and the count and armed fault-free hours [h] of
+    each run with exposure. Run by run because a run's sampled turbulence, wind and biases make its
+    false alarms cluster (measured on the DHC-6 attitude check: one run holds several), so rates
+    get the dispersion-scaled Garwood interval (quasi-Poisson,
+    :func:`fdi_sim.study.stats.overdispersed_rate`), which equals the plain one when phi <= 1."""
+    n_runs, counts, expos = 0, [], []
+    for r in records:
+        dr = rescore([r], out_dir, [scale], k=k, n=n, grace_s=grace_s).detectors.get(detector)
+        if dr is not None:
+            n_runs += dr.runs
+            if dr.exposure_h > 0:
+                counts.append(int(dr.false_alarms[0]))
+                expos.append(dr.exposure_h)
+    return n_runs, counts, expos
+
+
 def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path, detector: str,
                       target_per_h: float, split: str = "even", *, confidence: float = 0.95,
                       k: int | None = None, n: int | None = None, grace_s: float = LATE_GRACE_S,
@@ -303,19 +323,8 @@ def check_calibration(records: Sequence[Mapping[str, Any]], out_dir: str | Path,
     held = [r for r in records if int(r["index"]) % 2 != par]
     cal = calibration if calibration is not None else \
         calibrate_threshold(fit, out_dir, detector, target_per_h, k=k, n=n, grace_s=grace_s)
-    # run by run: a run's sampled turbulence, wind and biases make its false alarms cluster
-    # (measured on the DHC-6 attitude check: one run holds several), so the interval is the
-    # dispersion-scaled Garwood one (quasi-Poisson), which the plain interval equals when phi <= 1
     def per_run(rs: Sequence[Mapping[str, Any]]) -> tuple[int, list[int], list[float]]:
-        n_runs, counts, expos = 0, [], []
-        for r in rs:
-            dr = rescore([r], out_dir, [cal.scale], k=k, n=n, grace_s=grace_s).detectors.get(detector)
-            if dr is not None:
-                n_runs += dr.runs
-                if dr.exposure_h > 0:
-                    counts.append(int(dr.false_alarms[0]))
-                    expos.append(dr.exposure_h)
-        return n_runs, counts, expos
+        return per_run_false_alarms(rs, out_dir, detector, cal.scale, k=k, n=n, grace_s=grace_s)
 
     runs, counts, expos = per_run(held)
     expo_h = float(sum(expos))
@@ -350,11 +359,6 @@ STUDY_METHOD = (
     "the runs' k-of-n rule, against far_per_h (exact Poisson interval)")
 
 
-def _verdict(ci: Sequence[float], target: float) -> str:
-    """The (dispersion-scaled) interval against the target, as :func:`rate_verdict` words it."""
-    return "above" if ci[0] > target else "below" if ci[1] < target else "contains"
-
-
 def _rate(c: int, expo_h: float, runs: int, target: float, confidence: float) -> HeldRate:
     lo, hi = poisson_rate_interval(c, expo_h, confidence)
     return HeldRate(int(runs), int(c), float(expo_h), c / expo_h if expo_h > 0 else math.nan, (lo, hi),
@@ -376,6 +380,32 @@ def bank_rate(records: Sequence[Mapping[str, Any]], out_dir: str | Path, scales:
         c += int((onset & _outside(run.stats[ids[0]].t_s, run.record, grace_s)).sum())
         expo += exposure_s(run.record, grace_s)
     return _rate(c, expo / S_PER_H, len(runs), target_per_h, confidence)
+
+
+def finished_study(out: Path, purpose: str) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """A study results folder's ``study.json`` and its run records, every run completed with a
+    statistics log (``purpose`` words the refusal: "a calibration", "a validation").
+
+    Raises
+    ------
+    StudyError
+        Not a results folder, or a run not completed or without its log.
+    """
+    from fdi_sim.study.execute import load_records
+    from fdi_sim.study.stats import completed
+
+    fix = "fly the study to the end first (`fdi-sim study STUDY --out DIR`), with [output] statistics = true"
+    try:
+        meta = json.loads((out / "study.json").read_text())
+    except (OSError, ValueError):
+        raise StudyError(str(out), "study.json", "not a study results folder", fix) from None
+    recs = load_records(out)
+    done = completed(recs)
+    if not done or len(done) != len(recs) or not all(r.get("log") for r in done):
+        raise StudyError(str(out), "runs", f"{len(done)} of {len(recs)} runs completed"
+                         f"{'' if all(r.get('log') for r in done) else ', some without a statistics log'}: "
+                         f"{purpose} needs every run", fix)
+    return meta, done
 
 
 def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, split: str = "even",
@@ -404,21 +434,9 @@ def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, spli
     from fdi_sim.training.thresholds import design_node, THRESHOLD_CONFIDENCE, thresholds_source
     from fdi_sim.sim.run import build_sensors
     from fdi_sim.training.build import build_loop_bank
-    from fdi_sim.study.execute import load_records
-    from fdi_sim.study.stats import completed
 
     out = Path(out_dir)
-    fix = "fly the study to the end first (`fdi-sim study STUDY --out DIR`), with [output] statistics = true"
-    try:
-        meta = json.loads((out / "study.json").read_text())
-    except (OSError, ValueError):
-        raise StudyError(str(out), "study.json", "not a study results folder", fix) from None
-    recs = load_records(out)
-    done = completed(recs)
-    if not done or len(done) != len(recs) or not all(r.get("log") for r in done):
-        raise StudyError(str(out), "runs", f"{len(done)} of {len(recs)} runs completed"
-                         f"{'' if all(r.get('log') for r in done) else ', some without a statistics log'}: a "
-                         "calibration needs every run", fix)
+    meta, done = finished_study(out, "a calibration")
     thr0 = done[0].get("thresholds")
     other = [r["index"] for r in done if r.get("thresholds") != thr0]
     if other:
@@ -459,7 +477,7 @@ def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, spli
             _rate(cal.false_alarms, cal.exposure_h, cal.runs, target, confidence),
             HeldRate(chk.held_out_runs, chk.false_alarms, chk.exposure_h, chk.far_per_h,
                      (float(chk.far_per_h_ci[0]), float(chk.far_per_h_ci[1])),
-                     _verdict(chk.far_per_h_ci, target), detectable_ratio(chk.exposure_h, target, confidence)),
+                     interval_verdict(chk.far_per_h_ci, target), detectable_ratio(chk.exposure_h, target, confidence)),
             cal.method, float(chk.rate_ratio), (float(chk.rate_ratio_ci[0]), float(chk.rate_ratio_ci[1])),
             str(chk.ratio_check)))
     node = design_node(sc)

@@ -25,8 +25,7 @@ from fdi_sim.bank.thresholds_file import (
     Validation,
     read_thresholds,
 )
-from fdi_sim.decision.intervals import detectable_ratio, rate_verdict
-from fdi_sim.decision.outcome import LATE_GRACE_S
+from fdi_sim.decision.intervals import detectable_ratio, interval_verdict
 from fdi_sim.errors import StudyError
 from fdi_sim.seeds import role_of
 
@@ -50,23 +49,12 @@ def validate_study(out_dir: str | Path, thresholds: str | Path | None = None) ->
         thresholds than the file's; runs with faults; the calibration study itself.
     """
     from fdi_sim.scenario import load
-    from fdi_sim.study.calibration import bank_rate
-    from fdi_sim.study.execute import load_records
-    from fdi_sim.study.rescore import rescore
-    from fdi_sim.study.stats import completed, overdispersed_rate
+    from fdi_sim.study.calibration import bank_rate, finished_study, per_run_false_alarms
+    from fdi_sim.study.stats import overdispersed_rate
     from fdi_sim.training.thresholds import thresholds_source
 
     out = Path(out_dir)
-    fix = "fly the study to the end first (`fdi-sim study STUDY --out DIR`), with [output] statistics = true"
-    try:
-        meta = json.loads((out / "study.json").read_text())
-    except (OSError, ValueError):
-        raise StudyError(str(out), "study.json", "not a study results folder", fix) from None
-    recs = load_records(out)
-    done = completed(recs)
-    if not done or len(done) != len(recs) or not all(r.get("log") for r in done):
-        raise StudyError(str(out), "runs", f"{len(done)} of {len(recs)} runs completed with a statistics log: a "
-                         "validation needs every run", fix)
+    meta, done = finished_study(out, "a validation")
     seed = int(meta["study"]["seed"])
     s = role_of(seed)
     if s is None or s.role != "validation":
@@ -98,21 +86,14 @@ def validate_study(out_dir: str | Path, thresholds: str | Path | None = None) ->
     conf = t.confidence
     members = []
     for m in t.members:
-        counts, expos = [], []
-        for r in done:
-            dr = rescore([r], out, [1.0], grace_s=LATE_GRACE_S).detectors.get(m.id)
-            if dr is not None and dr.exposure_h > 0:
-                counts.append(int(dr.false_alarms[0]))
-                expos.append(dr.exposure_h)
+        _, counts, expos = per_run_false_alarms(done, out, m.id, 1.0)  # the file's thresholds as flown
         c, e = int(sum(counts)), float(sum(expos))
         _, ci, _ = overdispersed_rate(counts, expos, conf)
-        v = "undetermined" if e <= 0 else "above" if ci[0] > m.target_per_h else \
-            "below" if ci[1] < m.target_per_h else "contains"
+        v = interval_verdict(ci, m.target_per_h) if e > 0 else "undetermined"
         members.append(MemberRate(m.id, m.target_per_h, HeldRate(
             len(counts), c, e, c / e if e > 0 else math.nan, (float(ci[0]), float(ci[1])), v,
             detectable_ratio(e, m.target_per_h, conf))))
     b = bank_rate(done, out, {m.id: 1.0 for m in t.members}, t.far_per_h, confidence=conf)
-    b = replace(b, verdict=rate_verdict(b.false_alarms, b.exposure_h, t.far_per_h, conf))
     flight_h = float(sum(float(r.get("flight_h", 0.0)) for r in done))
     return replace(t, validation=Validation(str(meta["name"]), str(meta["identity"]), seed, len(done), flight_h, b,
                                             tuple(members), __version__))

@@ -40,3 +40,23 @@ def test_poisson_rate_interval_covers_at_its_level():
         ks = rng.poisson(rate * 10.0, size=4000)
         cover = np.mean([lo <= rate <= hi for lo, hi in (poisson_rate_interval(int(k), 10.0) for k in ks)])
         assert 0.95 <= cover < 0.995
+
+
+def test_verdicts_and_the_ratio_a_check_could_detect():
+    """``rate_verdict`` words the exact interval against the target; ``detectable_ratio`` is the
+    true rate at which the fewest counts whose interval lies above the target come half the time."""
+    from scipy.stats import poisson
+
+    from fdi_sim.decision.intervals import detectable_ratio, interval_verdict, poisson_rate_interval, rate_verdict
+
+    assert rate_verdict(0, 16.4, 0.1) == "contains"  # 0 alarms in 16.4 h: [0, 0.225]
+    assert rate_verdict(0, 50.0, 0.1) == "below" and rate_verdict(5, 10.0, 0.1) == "above"
+    assert rate_verdict(3, 0.0, 0.1) == "undetermined"
+    assert interval_verdict((0.2, 0.5), 0.1) == "above" and interval_verdict((0.0, 0.05), 0.1) == "below"
+    for hours, target in ((16.4, 0.02), (32.8, 0.1), (500.0, 0.1)):
+        ratio = detectable_ratio(hours, target)
+        k = next(k for k in range(1, 1000) if poisson_rate_interval(k, hours)[0] > target)
+        assert poisson_rate_interval(k - 1, hours)[0] <= target
+        assert poisson.sf(k - 1, ratio * target * hours) == pytest.approx(0.5, abs=1e-9)
+        assert ratio > 1.0
+    assert detectable_ratio(500.0, 0.1) < detectable_ratio(32.8, 0.1)  # more hours see smaller excesses
