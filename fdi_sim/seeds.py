@@ -93,6 +93,11 @@ REGISTRY: tuple[SeedSet, ...] = (
     SeedSet("envelope-hold-out", "hold-out", (15001, 15002),
             ("studies/f16_envelope_hold_out", "studies/dhc6_envelope_hold_out"),
             "fault-free studies across each aircraft's envelope, light to severe turbulence (issue 24's bar)"),
+    SeedSet("atlas-hold-out-scenarios", "hold-out", (90417, 90418),
+            ("tests/data/holdout/holdout_f16_roll_gyro_bias_7500ft.toml",
+             "tests/data/holdout/holdout_dhc6_calm_6900ft.toml"),
+            "new scenarios written for issue 24 (not shipped, never tuned on): a flight inside each atlas "
+            "envelope takes off with no training flight (tests/training/test_atlas.py, docs/make_atlas_table.py)"),
     SeedSet("test-calibration", "calibration", (21,), ("tests/study/test_calibration.py",),
             "the small DHC-6 calibration study of the thresholds-file tests (mechanics, not a verdict)"),
     SeedSet("test-validation", "validation", (24,), ("tests/study/test_calibration.py",),

@@ -294,6 +294,16 @@ class GustKalmanStream:
                  for a in (self._A, self._B, self._C, self._D, self._L, self._G, self._Si, self.schedule.points)]
         return b"".join(parts) + str(self.window_n).encode()
 
+    def design_arrays(self) -> tuple[NDArray[np.float64], ...]:
+        """The floating-point results :meth:`design_key` hashes (the shipped atlas compares them within
+        a tolerance, :mod:`fdi_sim.training.atlas`: another CPU rounds them differently)."""
+        return (self._A, self._B, self._C, self._D, self._L, self._G, self._Si, self.schedule.points)
+
+    def design_key_exact(self) -> bytes:
+        """What :meth:`design_key` depends on that is not a floating-point result: the window and the
+        arrays' shapes."""
+        return (str(self.window_n) + repr([a.shape for a in self.design_arrays()])).encode()
+
     def process_block(self, t_s: NDArray[np.float64], u: NDArray[np.float64], y: NDArray[np.float64],
                       ok: NDArray[np.bool_], fresh: NDArray[np.bool_], out: BlockOutputs) -> None:
         """The streaming contract's call (:meth:`process` into ``out``; ``t_s`` and ``fresh`` unused:

@@ -78,9 +78,11 @@ class FdiDesignSection(_Section):
     (``fdi_sim.training.schedule.design_scenario``): a Monte Carlo study designs its bank once per
     schedule-grid node at nominal conditions and flies it in the sampled ones."""
 
-    point: Literal["flight", "grid"] = Field(
-        default="flight", description="design at the flight's initial point, or at the nearest node of the "
-        "aircraft's schedule grid (fdi_sim.training.schedule.DEFAULT_SPACING)")
+    point: Literal["auto", "flight", "grid"] = Field(
+        default="auto", description="design at the flight's initial point, at the nearest node of the "
+        "aircraft's schedule grid (fdi_sim.training.schedule.DEFAULT_SPACING), or \"auto\": the calibrated design "
+        "of the aircraft's shipped atlas (fdi_sim.training.atlas: no training flight) where it covers the flight "
+        "and no other design field is given, else the flight's initial point")
     turbulence: Literal["none", "light", "moderate", "severe"] | None = Field(
         default=None, description="turbulence of the training flights (default: the flight's)")
     wind_speed_kts: float | None = Field(default=None, ge=0.0, le=100.0,

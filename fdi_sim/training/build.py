@@ -21,7 +21,7 @@ from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import per_sample_target
 from fdi_sim.training.flights import LazyTraining
-from fdi_sim.training.schedule import design_scenario
+from fdi_sim.training.schedule import design_choice
 from fdi_sim.training.thresholds import (
     MemberThresholdError, _replay_log, apply_study_thresholds, calibrate_thresholds, note_no_match, thresholds_source,
 )
@@ -58,12 +58,13 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
     members = bank_members(sc)
     if not members:
         return None
-    sc = design_scenario(sc)  # designs, training flights and thresholds: at the design conditions
+    sc, design_note = design_choice(sc)  # designs, training flights and thresholds: at the design conditions
     f = sc.model.fdi
     # the training flights are flown at most once, and only if some calibration is not cached
     logs = training_logs if training_logs is not None else LazyTraining(sc, progress)
     ctx = MemberContext(sc, tuple(cmd_names), tuple(meas_names), progress, logs)
-    streams, notes = [], []
+    streams: list[Any] = []
+    notes = [f"design: {design_note}"] if design_note else []
     for m in members:
         try:
             stream, note = member_stream(ctx, m)
@@ -89,7 +90,7 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
                        sim_rate_hz=float(sc.model.rate_hz), rate_hz=f.rate_hz, block_samples=S, decision=decision,
                        reconfigure=f.reconfigure, pilot_sensors=pilot_sensors, notes=tuple(notes), arm_s=f.arm_s)
         try:
-            _set_thresholds(sc, bank, logs, progress)
+            _set_thresholds(sc, bank, logs, progress, design_note)
             return bank
         except MemberThresholdError as exc:
             if f.on_design_failure != "skip" or len(streams) == 1:
@@ -99,7 +100,7 @@ def build_bank(sc: Scenario, *, meas_names: Sequence[str], cmd_names: Sequence[s
                      for n in notes]
 
 
-def _set_thresholds(sc: Scenario, bank: Any, logs: Any, progress: bool) -> None:
+def _set_thresholds(sc: Scenario, bank: Any, logs: Any, progress: bool, design_note: str = "") -> None:
     """Every member's threshold: from the scenario's thresholds file where it covers the bank,
     else trained on the fault-free flights (:mod:`fdi_sim.training.thresholds`)."""
     f = sc.model.fdi
@@ -116,9 +117,17 @@ def _set_thresholds(sc: Scenario, bank: Any, logs: Any, progress: bool) -> None:
         note = apply_study_thresholds(sc, bank, path, explicit=explicit, retrain=retrain)
         if note is None:  # the default's file does not cover this design: trained, and the log says why
             retrain()
-            bank.calibration = {**bank.calibration, "source": "trained", "note": note_no_match(sc, path)}
+            bank.calibration = {**bank.calibration, "source": _trained_source(bank), "note": note_no_match(sc, path)}
     else:
         calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
+        bank.calibration = {**bank.calibration, "source": _trained_source(bank)}
+    if design_note:
+        bank.calibration = {**bank.calibration, "design": design_note}
+
+
+def _trained_source(bank: Any) -> str:
+    """``"atlas"`` when the trained thresholds came from the shipped atlas (no flight), else ``"trained"``."""
+    return "atlas" if "atlas" in (bank.calibration or {}) else "trained"
 
 
 @dataclass

@@ -25,12 +25,9 @@ def cache_dir() -> Path:
     return Path(base) / "fdi-sim" / "calibrations"
 
 
-def calibration_key(sc: Scenario, design: Any, params: Mapping[str, Any], rate_hz: float, n: int,
-                    duration_s: float, target: float) -> str:
-    """What a calibration depends on, hashed: the fault-free scenario, the design itself (its
-    model matrices, gains and window, so a changed linearizer or default invalidates it), the
-    options, the rate, the number and length of the training flights, the target, the sensor
-    suite file the design and the flights use, and the package version."""
+def _calibration_parts(sc: Scenario, design: Any, params: Mapping[str, Any], rate_hz: float, n: int,
+                       duration_s: float, target: float) -> tuple[dict[str, Any], list[Any]]:
+    """What a calibration depends on: the inputs (JSON-able) and the design's arrays."""
     from fdi_sim.sensors.suite import suite_path
 
     ff = json.loads(fault_free(sc, 0, duration_s).to_json())
@@ -38,15 +35,37 @@ def calibration_key(sc: Scenario, design: Any, params: Mapping[str, Any], rate_h
     ff.pop("description", None)
     suite = Path(suite_path(sc.aircraft, sc.model.sensors.suite)).read_text()
     default_suite = Path(suite_path(sc.aircraft, "default")).read_text()
-    h = hashlib.sha256()
     m = design.model
-    for a in (m.A, m.B, m.C, m.D, m.u0, m.y0, design.gains[-1], design.signatures):
+    arrays = [m.A, m.B, m.C, m.D, m.u0, m.y0, design.gains[-1], design.signatures]
+    parts = {"scenario": ff, "params": dict(params), "rate_hz": rate_hz, "n": n, "window_n": design.window_n,
+             "n_gains": len(design.gains), "duration_s": duration_s, "target": target, "suite": suite,
+             "default_suite": default_suite, "version": __version__}
+    return parts, arrays
+
+
+def calibration_key(sc: Scenario, design: Any, params: Mapping[str, Any], rate_hz: float, n: int,
+                    duration_s: float, target: float) -> str:
+    """What a calibration depends on, hashed: the fault-free scenario, the design itself (its
+    model matrices, gains and window, so a changed linearizer or default invalidates it), the
+    options, the rate, the number and length of the training flights, the target, the sensor
+    suite file the design and the flights use, and the package version."""
+    parts, arrays = _calibration_parts(sc, design, params, rate_hz, n, duration_s, target)
+    h = hashlib.sha256()
+    for a in arrays:
         h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-    blob = json.dumps({"scenario": ff, "params": dict(params), "rate_hz": rate_hz, "n": n, "window_n": design.window_n,
-                       "n_gains": len(design.gains), "duration_s": duration_s, "target": target, "suite": suite,
-                       "default_suite": default_suite, "version": __version__, "design": h.hexdigest()},
-                      sort_keys=True, default=str)
+    blob = json.dumps({**parts, "design": h.hexdigest()}, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
+
+
+def calibration_atlas_key(sc: Scenario, design: Any, params: Mapping[str, Any], rate_hz: float, n: int,
+                          duration_s: float, target: float) -> tuple[str, list[list[float]]]:
+    """The atlas key of a calibration (:func:`calibration_key` without the design's bits) and the
+    design's fingerprint (:func:`fdi_sim.training.atlas.fingerprint`)."""
+    from fdi_sim.training.atlas import fingerprint, inputs_key
+
+    parts, arrays = _calibration_parts(sc, design, params, rate_hz, n, duration_s, target)
+    shapes = [list(np.shape(a)) for a in arrays]
+    return inputs_key({**parts, "shapes": shapes}), fingerprint(arrays)
 
 
 @dataclass(frozen=True, eq=False)

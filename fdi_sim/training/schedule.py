@@ -436,6 +436,88 @@ def design_schedule(sc: Scenario, points: Sequence[Sequence[float]], *, rate_hz:
 
 
 def design_scenario(sc: Scenario) -> Scenario:
+    """The scenario the bank is designed and calibrated on (:func:`design_choice`)."""
+    return design_choice(sc)[0]
+
+
+def design_choice(sc: Scenario) -> tuple[Scenario, str]:
+    """The scenario the bank is designed and calibrated on, and a note for the log saying which.
+
+    With ``[fdi.design] point = "auto"`` (the default) and no other design field: the calibrated
+    design of the aircraft's shipped atlas (:func:`atlas_design`) when it covers the flight, else
+    the flight itself (the note says why). Otherwise :func:`_design_scenario`.
+    """
+    d = sc.model.fdi.design
+    if d.point == "auto":
+        if all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale)):
+            des, note = atlas_design(sc)
+            if des is not None:
+                return des, note
+            return _design_scenario(sc), f"designed at the flight's own point and conditions: {note}"
+    return _design_scenario(sc), ""
+
+
+def atlas_design(sc: Scenario) -> tuple[Scenario | None, str]:
+    """The calibrated design of the flight's node in the aircraft's atlas (:mod:`fdi_sim.training.atlas`):
+    the atlas's reference scenario at the flight's initial point, with the flight's sensor suite,
+    simulation rate, ``[fdi]`` settings and detectors, designed at the grid node in the atlas's
+    conditions (:data:`fdi_sim.training.atlas.CONDITIONS`); None and why when the atlas does not
+    cover the flight (none shipped, a flight crossing several schedule points, a node or settings
+    the atlas was not made for).
+    """
+    from fdi_sim.training.atlas import CONDITIONS, load_atlas, scenario_digest
+
+    atlas = load_atlas(sc.aircraft)
+    if atlas is None:
+        return None, f"no calibration atlas for the {sc.aircraft} (fdi_sim.training.atlas)"
+    if sc.model.fdi.schedule == "auto":
+        pts = schedule_points(sc)
+        if len(pts) > 1:
+            return None, (f"the flight crosses {len(pts)} schedule points ({'; '.join(p.label() for p in pts[:4])}"
+                          f"{'; ...' if len(pts) > 4 else ''}): the atlas covers flights at one node")
+    des = calibrated_design(sc, atlas.reference)
+    node = atlas.node_for(scenario_digest(json.loads(des.to_json())))
+    ini = sc.model.initial
+    h, vc = des.model.initial.h_ft, des.model.initial.vc_kts
+    where = f"node h {h:g} ft, vc {vc:g} kt, flaps {float(ini.flaps_deg):g} deg"
+    if node is None:
+        inside = any((n.h_ft, n.vc_kts, n.flaps_deg) == (h, vc, float(ini.flaps_deg)) for n in atlas.nodes)
+        why = ("its sensors, simulation rate or [fdi] settings differ from those the atlas was made with"
+               if inside else f"the atlas has no such node (its envelope: {atlas.envelope})")
+        return None, f"{atlas.path} does not cover this flight ({where}): {why}"
+    if node.status != "ok":
+        return None, f"{atlas.path}: {where} has no calibration ({node.status})"
+    return des, (f"calibrated design of {atlas.path} at {where} ({atlas.reference}'s flights, "
+                 f"{CONDITIONS['turbulence']} turbulence, no wind, noise scale 1; {atlas.training})")
+
+
+def calibrated_design(sc: Scenario, reference: str) -> Scenario:
+    """The calibrated design scenario of a flight: the shipped scenario ``reference`` at the flight's
+    initial point (h, calibrated airspeed, flaps), with the flight's sensor section, simulation
+    rate, ``[fdi]`` settings and detectors, no faults, designed at the nearest grid node in the
+    atlas conditions (:data:`fdi_sim.training.atlas.CONDITIONS`). The atlas is made of these
+    (:mod:`fdi_sim.study.atlas`), so it depends on nothing else of the flight."""
+    from fdi_sim.scenario.loader import load
+    from fdi_sim.scenario.shipped import shipped_dir
+    from fdi_sim.training.atlas import CONDITIONS
+
+    ref = load(shipped_dir() / f"{reference}.toml")
+    data = json.loads(ref.to_json())
+    flight = json.loads(sc.to_json())
+    ini = sc.model.initial
+    data["initial"] = {**data["initial"], "h_ft": float(ini.h_ft), "vc_kts": initial_vc_kts(sc), "vt_kts": None,
+                       "flaps_deg": float(ini.flaps_deg)}
+    for k in ("sensors", "detectors", "rate_hz"):
+        if k in flight:
+            data[k] = flight[k]
+        else:
+            data.pop(k, None)
+    data["fdi"] = {**flight.get("fdi", {}), "design": dict(CONDITIONS)}
+    data["faults"] = []
+    return _design_scenario(from_dict(data, source=f"{sc.source} (calibrated design on {reference})"))
+
+
+def _design_scenario(sc: Scenario) -> Scenario:
     """The scenario the bank is designed and calibrated on: ``sc`` itself unless ``[fdi.design]``
     moves the point to the schedule grid's nearest node or sets the training flights' turbulence,
     wind or sensor noise.
@@ -446,7 +528,7 @@ def design_scenario(sc: Scenario) -> Scenario:
     bank), and each node is designed and calibrated once (cached).
     """
     d = sc.model.fdi.design
-    if d.point == "flight" and all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale)):
+    if d.point != "grid" and all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale)):
         return sc
     data = json.loads(sc.to_json())
     what = []
@@ -472,7 +554,7 @@ def design_scenario(sc: Scenario) -> Scenario:
         data["sensors"] = {**data.get("sensors", {}), "noise_scale": d.noise_scale}
         what.append(f"noise scale {d.noise_scale:g}")
     # the design conditions are the design; a flight-specific name, seed or duration is not
-    data["fdi"] = {**data["fdi"], "design": {}}
+    data["fdi"] = {**data["fdi"], "design": {"point": "flight"}}
     data.update(name=f"{sc.aircraft}_design", description="", seed=0, faults=[])
     return from_dict(data, source=f"{sc.source} (bank design at {', '.join(what)})")
 

@@ -194,6 +194,35 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
+def _thresholds_atlas_key(sc: Scenario, bank: Any, p: float) -> tuple[str, list[list[float]]]:
+    """The atlas key of the members' thresholds (:func:`_thresholds_key` with each member's design
+    bits replaced: a member whose stream gives ``design_arrays()`` by its ``design_key_exact()`` and a
+    fingerprint of the arrays, :mod:`fdi_sim.training.atlas`; any other by its design key) and the
+    fingerprint."""
+    from fdi_sim.decision.tail import TAIL_METHOD
+    from fdi_sim.detectors.stream import stream_design_key
+    from fdi_sim.training.atlas import fingerprint, inputs_key
+    from fdi_sim.training.flights import fault_free
+
+    f = sc.model.fdi
+    ff = json.loads(fault_free(sc, 0, f.calibration_duration_s).to_json())
+    for k in ("name", "description", "fdi"):
+        ff.pop(k, None)
+    members, fp = [], []
+    for mem in bank.members:
+        arrays = getattr(mem.stream, "design_arrays", None)
+        if arrays is not None:
+            members.append([mem.id, mem.stream.design_key_exact().decode()])
+            fp.extend(fingerprint(arrays()))
+        else:
+            members.append([mem.id, hashlib.sha256(stream_design_key(mem.stream)).hexdigest()])
+    return inputs_key({"scenario": ff, "p": p, "arm_s": f.arm_s, "confidence": THRESHOLD_CONFIDENCE,
+                       "n": f.calibration_flights, "T": f.calibration_duration_s,
+                       "decision": [f.persistence_k, f.persistence_n], "method": f"episodes-v5-{TAIL_METHOD}",
+                       "version": __version__, "members": members, "rate_hz": bank.rate_hz,
+                       "meas": list(bank.meas_names)}), fp
+
+
 class MemberThresholdError(DesignError):
     """One member's threshold cannot be set on the training flights (``member`` names it)."""
 
@@ -212,6 +241,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
     Returns the record stored in the cache (thresholds, method, training samples per member).
     """
     from fdi_sim.decision.tail import confident_episode_threshold, confident_tail_threshold, persistence_series
+    from fdi_sim.training.atlas import lookup as atlas_lookup, record as atlas_record
     from fdi_sim.training.cache import cache_lock, read_entry, write_entry
     from fdi_sim.training.flights import fly_training, training_seeds
 
@@ -225,6 +255,12 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                 rec = None
         except (KeyError, TypeError):
             rec = None  # a damaged entry is recomputed
+        akey, afp = _thresholds_atlas_key(sc, bank, p)
+        if rec is None and use_cache:  # the shipped atlas: the same entry, made by the project
+            hit, _ = atlas_lookup(sc.aircraft, "bank", akey, afp)
+            if hit is not None and [r.get("id") for r in hit["entry"].get("members", [])] == [m.id for m in bank.members]:
+                rec = {**hit["entry"], "atlas": hit["atlas"]}
+                write_entry(path, rec, use_cache)
         if rec is None:
             logs = training_logs
             if logs is None:
@@ -272,6 +308,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                 rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
                                        "max_training": float(x.max()) if x.size else None})
             write_entry(path, rec, use_cache)
+    atlas_record("bank", akey, afp, {k: v for k, v in rec.items() if k != "atlas"})
     for mem, r in zip(bank.members, rec["members"]):
         mem.set_threshold(float(r["threshold"]))
     bank.calibration = rec

@@ -1,0 +1,94 @@
+"""The calibration atlases and the take-off time of a new scenario, as the generated block
+``atlas`` of docs/bank.md.
+
+For each aircraft: the atlas's nodes (how many calibrated, which failed and why), the gust
+filter's trained threshold range over them; then the time from starting ``fdi-sim run`` to the
+end of a 0.5 s flight of each hold-out scenario of ``tests/data/holdout`` (written for issue 24,
+not shipped) in a fresh process with an empty calibration cache, after one unmeasured warm-up
+run: the time to take-off with the default bank, its design and thresholds from the atlas (an
+upper bound: it includes the interpreter's start, the imports and the 0.5 s flight).
+
+    python docs/make_atlas_table.py
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+from fdi_sim.training.atlas import read_atlas  # noqa: E402
+
+AIRCRAFT = ("f16", "DHC6")
+HOLDOUT = sorted((ROOT / "tests" / "data" / "holdout").glob("*.toml"))
+INPUTS = tuple(f"aircraft/{ac}/fdi_atlas.json" for ac in AIRCRAFT) + (
+    "tests/data/holdout", "fdi_sim/training/atlas.py", "fdi_sim/training/schedule.py", "docs/make_atlas_table.py")
+MD = ROOT / "docs" / "bank.md"
+REPEATS = 3
+
+
+def _takeoff(path: Path, cache: Path) -> tuple[float, dict]:
+    """Wall time [s] of ``fdi-sim run`` on a 0.5 s copy of the scenario, and the log's calibration."""
+    with tempfile.TemporaryDirectory() as tmp:
+        text = path.read_text()
+        lines = [ln if not ln.startswith("duration_s") else "duration_s = 0.5" for ln in text.splitlines()]
+        sc = Path(tmp) / path.name
+        sc.write_text("\n".join(lines) + "\n")
+        log = Path(tmp) / "run.mcap"
+        env = {**os.environ, "FDI_SIM_CACHE": str(cache)}
+        env.pop("FDI_SIM_ATLAS", None)
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "fdi_sim.cli", "run", str(sc), "--log", str(log)], check=True,
+                       env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        wall = time.perf_counter() - t0
+        from fdi_sim.flightlog import read_log
+
+        cal = json.loads(read_log(log).metadata["fdi"]["calibration"])
+        return wall, cal
+
+
+def render() -> str:
+    lines = ["| aircraft | reference flights | envelope | nodes calibrated | not calibrated | gust-filter trained "
+             "threshold over the nodes |", "|---|---|---|---|---|---|"]
+    for ac in AIRCRAFT:
+        a = read_atlas(ROOT / "aircraft" / ac / "fdi_atlas.json", ac)
+        ok = [n for n in a.nodes if n.status == "ok"]
+        bad = [f"{n.h_ft:g} ft / {n.vc_kts:g} kt ({n.status[:60]})" for n in a.nodes if n.status != "ok"]
+        raw = json.loads((ROOT / "aircraft" / ac / "fdi_atlas.json").read_text())
+        gust = [n["thresholds"].get("kalman-gust-v1") for n in raw["nodes"] if n["status"] == "ok"]
+        gust = [g for g in gust if g is not None]
+        env = ", ".join(f"{k} {v[0]:g}-{v[1]:g}" for k, v in a.envelope.items())
+        lines.append(f"| {ac} | `{a.reference}`, {a.training} | {env} | {len(ok)} of {len(a.nodes)} | "
+                     f"{'; '.join(bad) or 'none'} | {min(gust):.4g} - {max(gust):.4g} |")
+    lines += ["", "| new scenario (tests/data/holdout) | calibration in its log | node | start to the end of a 0.5 s "
+              "flight, fresh process, empty cache [s] |", "|---|---|---|---|"]
+    for path in HOLDOUT:
+        with tempfile.TemporaryDirectory() as cache:
+            _takeoff(path, Path(cache) / "warm-up")  # warms the OS's file cache and the imports' bytecode
+            walls, cal = [], {}
+            for i in range(REPEATS):
+                w, cal = _takeoff(path, Path(cache) / f"c{i}")
+                walls.append(w)
+        node = cal.get("atlas", {}).get("node", {})
+        where = f"{node.get('h_ft', float('nan')):g} ft / {node.get('vc_kts', float('nan')):g} kt" if node else "-"
+        lines.append(f"| `{path.stem}` | {cal.get('source')} | {where} | {min(walls):.2f} (median "
+                     f"{sorted(walls)[len(walls) // 2]:.2f} of {REPEATS}) |")
+    return "\n".join(lines)
+
+
+def main() -> int:
+    stamp = make_stamp("atlas", "python docs/make_atlas_table.py", INPUTS)
+    MD.write_text(replace_block(MD.read_text(), stamp, render()))
+    print(f"wrote the atlas block of {MD}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
