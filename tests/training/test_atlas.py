@@ -106,7 +106,7 @@ def test_outside_the_atlas_the_log_says_why():
 [[maneuvers]]
 type = "altitude-v1"
 t_start_s = 5.0
-target = 14000.0
+h_ft = 14000.0
 rate_fps = 50.0
 """
     sc = loads(climb, "climb.toml")
