@@ -44,6 +44,7 @@ from fdi_sim.decision.failure_log import FailureLogger
 from fdi_sim.detectors.stream import BlockOutputs, EstimatesActuators
 from fdi_sim.bank.kernels import average_commands, decide, gather_columns, statistic_rows, take_columns
 from fdi_sim.bank.topics import RECONFIG_JSON_SCHEMA, STAT_FIELDS, TOPIC_FDI_RECONFIG, msg_name
+from fdi_sim.bank.turbulence import ThresholdSchedule, scheduled_threshold, turbulence_estimate
 from fdi_sim.decision.outcome import LATE_GRACE_S, fault_outcome
 from fdi_sim.errors import DesignError
 
@@ -149,6 +150,7 @@ class _Member:
         self.estimates_actuators = isinstance(stream, EstimatesActuators)
         self.keep = False
         self.j_start = 0
+        self.sched: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # (log sigma, log threshold)
         self.reset()
 
     @property
@@ -180,7 +182,8 @@ class _Member:
         self.samples = 0
 
     def run(self, u_avg: NDArray[np.float64], meas: NDArray[np.float64], valid: NDArray[np.bool_], row0: int,
-            n: int, S: int, t: NDArray[np.float64], unarmed: int = 0) -> None:
+            n: int, S: int, t: NDArray[np.float64], unarmed: int = 0,
+            sigma: NDArray[np.float64] | None = None) -> None:
         if S == self.full_S:  # the loop's case: the arrays themselves (slicing costs ~0.2 us a view)
             y, ok, fresh, u, out, ex, al, iso, lead = (self.y, self.ok, self.fresh, self.u, self.out, self.exceed,
                                                        self.alarm, self.iso, self.lead)
@@ -193,6 +196,8 @@ class _Member:
         if self.estimates_actuators:  # the block's first sample, for the effectiveness estimator
             self.j_start = int(self.stream.samples_seen)
         self.stream.process_block(t[:S] if S != t.shape[0] else t, u, y, ok, fresh, out)
+        if self.sched is not None and sigma is not None:  # thresholds on the estimated turbulence
+            scheduled_threshold(sigma, self.sched[0], self.sched[1], out.threshold)
         if unarmed:  # before the bank is armed the statistic is logged, never decided on
             out.valid[:unarmed] = False
         decide(out.statistic, out.threshold, out.valid, out.hypothesis, self.decision.k, self.angle_rule, self.ring,
@@ -291,6 +296,11 @@ class FdiBank:
         self._t = np.empty(self.S)
         self._writer = None
         self._ch_reconf = None
+        self.schedule: ThresholdSchedule | None = None
+        self._sched_col = -1
+        self._sched_state = np.zeros(4)
+        self._sigma = np.empty(self.S)
+        self._sigma_trace: list[NDArray[np.float64]] = []
         self.reset()
 
     # --- lifecycle -----------------------------------------------------------------------------
@@ -300,6 +310,9 @@ class FdiBank:
             m.reset()
         self.samples_done = 0
         self._t_trace: list[NDArray[np.float64]] = []
+        if hasattr(self, "_sched_state"):
+            self._sched_state[:] = 0.0
+            self._sigma_trace = []
         self.valid_rows[:] = True
         self.failure_log = FailureLogger(self.hypotheses)
         self._sig = np.zeros(len(self.hypotheses), dtype=np.bool_)
@@ -313,6 +326,41 @@ class FdiBank:
         self._estimators: dict[str, tuple[_Member, Any, float]] = {}  # actuator -> (member, estimator, start)
         self.command_scale: tuple[float, float, float, float] | None = None
         self.reconfig_events: list[dict[str, Any]] = []
+
+    def set_schedule(self, schedule: ThresholdSchedule | None) -> None:
+        """Schedule the members' thresholds on the estimated turbulence
+        (:mod:`fdi_sim.bank.turbulence`), or stop (None). A member the schedule does not name keeps
+        its threshold; a named one's stream threshold is set to its lowest, so that it isolates
+        wherever the scheduled threshold can be exceeded.
+
+        Raises
+        ------
+        DesignError
+            The schedule's signal is not a measurement of the bank, or it names no member.
+        """
+        if schedule is None:
+            self.schedule, self._sched_col = None, -1
+            for m in self.members:
+                m.sched = None
+            return
+        if schedule.signal not in self.meas_names:
+            raise DesignError(f"the threshold schedule reads {schedule.signal}, which the bank does not measure")
+        named = [m for m in self.members if m.id in schedule.thresholds]
+        if not named:
+            raise DesignError(f"the threshold schedule names none of the bank's members {[m.id for m in self.members]}")
+        self.schedule, self._sched_col = schedule, self.meas_names.index(schedule.signal)
+        for m in self.members:
+            if m.id in schedule.thresholds:
+                m.sched = schedule.log_tables(m.id)
+                m.set_threshold(float(np.exp(m.sched[1][0])))
+            else:
+                m.sched = None
+        self.reset()
+
+    def sigma_trace(self) -> NDArray[np.float64]:
+        """The turbulence estimate of every sample since reset, while a trace is kept (empty
+        without a schedule)."""
+        return np.concatenate(self._sigma_trace) if self._sigma_trace else np.zeros(0)
 
     def keep_trace(self, keep: bool = True) -> None:
         """Keep every block's statistic, threshold, decision and isolation (replay, calibration,
@@ -428,8 +476,16 @@ class FdiBank:
         row0 = self.samples_done * self.n
         active = False
         unarmed = min(S, max(0, self.arm_samples - self.samples_done))
+        sigma = None
+        if self.schedule is not None:
+            sigma = self._sigma if S == self.S else self._sigma[:S]
+            c = self._sched_col
+            turbulence_estimate(meas[:S, c], valid[:S, c], self._sched_state,
+                                1.0 / (self.schedule.tau_s * self.rate_hz), self.schedule.clip ** 2, sigma)
+            if self.members and self.members[0].keep:
+                self._sigma_trace.append(sigma.copy())
         for m in self.members:
-            m.run(u_avg, meas, valid, row0, self.n, S, t, unarmed)
+            m.run(u_avg, meas, valid, row0, self.n, S, t, unarmed, sigma)
             if m.was_on or m.st[5]:  # in alarm before the block or at some sample of it
                 active = True
         changed = False

@@ -56,7 +56,8 @@ def envelope_nodes(aircraft: str, envelope: Mapping[str, Any] | None = None) -> 
     return sorted(out)
 
 
-def node_flight(aircraft: str, h_ft: float, vc_kts: float) -> Any:
+def node_flight(aircraft: str, h_ft: float, vc_kts: float, turbulence: str = "moderate",
+                maneuvers: str = "doublets") -> Any:
     """The reference scenario at a node with the default bank: the flight whose calibrated design
     the atlas holds there (any flight with default sensors and ``[fdi]`` settings near the node has
     the same design)."""
@@ -66,13 +67,19 @@ def node_flight(aircraft: str, h_ft: float, vc_kts: float) -> Any:
     ref = ENVELOPES[aircraft]["reference"]
     data = json.loads(load(shipped_dir() / f"{ref}.toml").to_json())
     data["initial"] = {**data["initial"], "h_ft": float(h_ft), "vc_kts": float(vc_kts), "vt_kts": None}
+    data["atmosphere"] = {**data.get("atmosphere", {}), "turbulence": turbulence}
+    if maneuvers == "steady":
+        data["maneuvers"] = []
     data["fdi"] = {"bank": "default"}
     data["faults"] = []
-    return from_dict(data, source=f"{ref} at the atlas node h {h_ft:g} ft, vc {vc_kts:g} kt")
+    return from_dict(data, source=f"{ref} at the atlas node h {h_ft:g} ft, vc {vc_kts:g} kt, {turbulence} turbulence")
 
 
-def node_task(aircraft: str, h_ft: float, vc_kts: float, cache: str) -> dict[str, Any]:
-    """One node (in a worker): its calibrated design, bank and recorded entries, or why it has none."""
+def node_task(aircraft: str, h_ft: float, vc_kts: float, turbulence: str, maneuvers: str, cache: str,
+              schedule: bool = False) -> dict[str, Any]:
+    """One node and turbulence level (in a worker): its calibrated design, bank and recorded
+    entries, or why it has none; with ``schedule``, also the members' thresholds at every level
+    (:func:`level_schedule`, a development option: not in the shipped atlas)."""
     os.environ["FDI_SIM_CACHE"] = cache
     os.environ["FDI_SIM_ATLAS"] = "off"  # never the file being remade
     from fdi_sim.errors import DesignError
@@ -81,43 +88,108 @@ def node_task(aircraft: str, h_ft: float, vc_kts: float, cache: str) -> dict[str
     from fdi_sim.training.atlas import scenario_digest
     from fdi_sim.bank.members import per_sample_target
     from fdi_sim.training.build import build_bank
-    from fdi_sim.training.thresholds import calibrate_thresholds
+    from fdi_sim.training.flights import LazyTraining
     from fdi_sim.training.schedule import calibrated_design
+    from fdi_sim.training.thresholds import calibrate_thresholds
 
     t0 = time.perf_counter()
-    flight = node_flight(aircraft, h_ft, vc_kts)
+    flight = node_flight(aircraft, h_ft, vc_kts, turbulence, maneuvers)
     des = calibrated_design(flight, ENVELOPES[aircraft]["reference"])
     node = {"h_ft": float(des.model.initial.h_ft), "vc_kts": float(des.model.initial.vc_kts),
-            "flaps_deg": float(des.model.initial.flaps_deg), "design_digest": scenario_digest(json.loads(des.to_json()))}
+            "flaps_deg": float(des.model.initial.flaps_deg), "turbulence": des.model.atmosphere.turbulence,
+            "maneuvers": "doublets" if des.maneuvers else "steady",
+            "design_digest": scenario_digest(json.loads(des.to_json()))}
     atlas.RECORDER = []
+    notes: list[str] = []
     try:
         sensors = build_sensors(des, des.dt_s)
+        logs = LazyTraining(des, False)
         bank = build_bank(des, meas_names=sensors.names, cmd_names=PILOT_FIELDS,
                           sensor_rates_hz={s.name: s.rate_hz for s in sensors.specs}, pilot_sensors=sensors.names,
-                          progress=False)
+                          progress=False, training_logs=logs)
         thresholds = {m.id: float(m.threshold) for m in bank.members}
-        # the trained thresholds too where a study's file gave the bank its own (its design node): on
-        # another CPU that file is matched by them (fdi_sim.training.thresholds.apply_study_thresholds)
-        f = des.model.fdi
-        calibrate_thresholds(des, bank, per_sample_target(f.far_per_h, len(bank.members), f.rate_hz), progress=False)
+        sched, sigma = None, {}
+        if schedule:
+            sched, notes = level_schedule(des, bank, logs)
+            sigma = dict(zip(sched.levels, sched.sigma)) if sched is not None else {}
+        else:
+            # the trained thresholds too where a study's file gave the bank its own (its design node):
+            # on another CPU that file is matched by them (fdi_sim.training.thresholds.apply_study_thresholds)
+            f = des.model.fdi
+            calibrate_thresholds(des, bank, per_sample_target(f.far_per_h, len(bank.members), f.rate_hz),
+                                 progress=False, training_logs=logs)
         rec = list(atlas.RECORDER)
+        for e in rec:
+            if e["kind"] == "bank" and sched is not None:
+                e["entry"] = {**e["entry"], "schedule": sched.to_dict()}
         status = "ok"
     except DesignError as exc:
-        rec, status, thresholds = [], f"failed: {exc}", {}
+        rec, status, thresholds, sigma = [], f"failed: {exc}", {}, {}
     finally:
         atlas.RECORDER = None
-    return {**node, "status": status, "entries": rec, "thresholds": thresholds, "wall_s": time.perf_counter() - t0}
+    return {**node, "status": status, "entries": rec, "thresholds": thresholds, "sigma": sigma, "notes": notes,
+            "wall_s": time.perf_counter() - t0}
+
+
+def level_schedule(des: Any, bank: Any, logs: Any) -> tuple[Any, list[str]]:
+    """The members' thresholds at each turbulence level and the levels' anchors, on training flights
+    of the calibrated design flown in that level (the moderate ones are the design's own): the
+    :class:`~fdi_sim.bank.turbulence.ThresholdSchedule` of the node, and notes (a level whose flights
+    cannot be flown or calibrated is left out, and said)."""
+    from fdi_sim.bank.members import per_sample_target
+    from fdi_sim.bank.turbulence import CLIP_G, LEVELS, SIGNAL, TAU_S, ThresholdSchedule, anchors, turbulence_series
+    from fdi_sim.errors import DesignError
+    from fdi_sim.scenario.loader import from_dict
+    from fdi_sim.training import atlas
+    from fdi_sim.training.flights import fly_training, training_seeds
+    from fdi_sim.training.thresholds import calibrate_thresholds, sample_signal
+
+    f = des.model.fdi
+    p = per_sample_target(f.far_per_h, len(bank.members), f.rate_hz)
+    saved, atlas.RECORDER = atlas.RECORDER, None  # the levels' own entries are not the atlas's
+    levels, sig, thr, notes = [], [], {m.id: [] for m in bank.members}, []
+    try:
+        for level in LEVELS:
+            data = json.loads(des.to_json())
+            data["atmosphere"] = {**data.get("atmosphere", {}), "turbulence": level}
+            lsc = from_dict(data, source=f"{des.source} ({level} turbulence)")
+            own = level == des.model.atmosphere.turbulence
+            try:
+                if own:  # the design's own flights and entry (recorded for the atlas)
+                    lg = list(logs)
+                    atlas.RECORDER = saved
+                    rec = calibrate_thresholds(des, bank, p, training_logs=lg, progress=False)
+                else:
+                    lg = fly_training(lsc, training_seeds(f.calibration_flights), f.calibration_duration_s,
+                                      progress=False)
+                    rec = calibrate_thresholds(lsc, bank, p, training_logs=lg, progress=False)
+            except DesignError as exc:
+                atlas.RECORDER = None
+                notes.append(f"{level}: left out ({exc})")
+                continue
+            atlas.RECORDER = None
+            series = [turbulence_series(*sample_signal(bank, g, SIGNAL), bank.rate_hz) for g in lg]
+            levels.append(level)
+            sig.append(anchors(series, bank.arm_samples))
+            for m, r in zip(bank.members, rec["members"]):
+                thr[m.id].append(float(r["threshold"]))
+    finally:
+        atlas.RECORDER = saved
+    if len(levels) < 2:
+        return None, notes + ["fewer than two levels: no schedule"]
+    return ThresholdSchedule(SIGNAL, TAU_S, CLIP_G, tuple(levels), tuple(sig), {k: tuple(v) for k, v in thr.items()}), notes
 
 
 def make_atlas(aircraft: str, out: Path, *, workers: int = 2, progress: bool = True,
-               nodes: Sequence[tuple[float, float]] | None = None) -> dict[str, Any]:
+               nodes: Sequence[tuple[float, float]] | None = None, schedule: bool = False,
+               doublet_levels: Sequence[str] | None = None) -> dict[str, Any]:
     """Fly every node's training flights (cached) and write the atlas file ``out``.
 
     Returns the file's content.
     """
     from fdi_sim.stamp import make_stamp
     from fdi_sim.study.execute import _client
-    from fdi_sim.training.atlas import CONDITIONS
+    from fdi_sim.training.atlas import CONDITIONS, LEVELS, MANEUVERS
     from fdi_sim.training.cache import cache_dir
     from fdi_sim.training.flights import training_seeds
     from fdi_sim.scenario.loader import load
@@ -132,25 +204,30 @@ def make_atlas(aircraft: str, out: Path, *, workers: int = 2, progress: bool = T
     try:
         from distributed import as_completed
 
-        futs = [client.submit(node_task, aircraft, h, v, cache, pure=False) for h, v in nodes]
+        combos = [(lv, mv) for mv in MANEUVERS for lv in LEVELS
+                  if mv != "doublets" or doublet_levels is None or lv in doublet_levels]
+        futs = [client.submit(node_task, aircraft, h, v, lv, mv, cache, schedule, pure=False)
+                for lv, mv in combos for h, v in nodes]
         for i, fut in enumerate(as_completed(futs, loop=client.loop), 1):
             r = fut.result()
             results.append(r)
             if progress:
-                print(f"atlas {aircraft}: {i}/{len(nodes)} nodes, h {r['h_ft']:g} ft vc {r['vc_kts']:g} kt: "
+                print(f"atlas {aircraft}: {i}/{len(futs)}, h {r['h_ft']:g} ft vc {r['vc_kts']:g} kt "
+                      f"{r['turbulence']} {r['maneuvers']}: "
                       f"{r['status'][:80]} ({r['wall_s']:.0f} s; {time.perf_counter() - t0:.0f} s in all)",
                       file=sys.stderr, flush=True)
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-    results.sort(key=lambda r: (r["h_ft"], r["vc_kts"]))
+    results.sort(key=lambda r: (MANEUVERS.index(r["maneuvers"]), LEVELS.index(r["turbulence"]), r["h_ft"], r["vc_kts"]))
     ref = load(shipped_dir() / f"{env['reference']}.toml")
     fdi = ref.model.fdi
     entries: dict[str, Any] = {}
     for r in results:
         for e in r["entries"]:
-            entries[f"{e['kind']}:{e['key']}"] = {"node": [r["h_ft"], r["vc_kts"], r["flaps_deg"]],
+            entries[f"{e['kind']}:{e['key']}"] = {"node": [r["h_ft"], r["vc_kts"], r["flaps_deg"], r["turbulence"],
+                                                           r["maneuvers"]],
                                                   "fingerprint": e["fingerprint"], "entry": e["entry"]}
     seeds = training_seeds(fdi.calibration_flights)
     stamp = make_stamp(f"atlas-{aircraft}", f"python -m fdi_sim.study.atlas {aircraft} --workers {workers}",
@@ -160,8 +237,10 @@ def make_atlas(aircraft: str, out: Path, *, workers: int = 2, progress: bool = T
            "training": (f"{fdi.calibration_flights} fault-free flights of {fdi.calibration_duration_s:g} s per node "
                         f"(training seeds {seeds[0]}-{seeds[-1]})"),
            "stamp": asdict(stamp),
-           "nodes": [{k: r[k] for k in ("h_ft", "vc_kts", "flaps_deg", "design_digest", "status")} | {
-               "thresholds": r["thresholds"]} for r in results],
+           "levels": list(LEVELS), "maneuvers": list(MANEUVERS),
+           "variants": [list(c) for c in combos],
+           "nodes": [{k: r[k] for k in ("h_ft", "vc_kts", "flaps_deg", "turbulence", "maneuvers", "design_digest",
+                                        "status", "thresholds", "sigma", "notes")} for r in results],
            "entries": entries}
     tmp = out.with_suffix(".tmp")
     tmp.write_text(json.dumps(doc, indent=None, separators=(",", ":")) + "\n")
@@ -176,9 +255,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("aircraft", choices=sorted(ENVELOPES))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=None, help="default: aircraft/<aircraft>/fdi_atlas.json")
+    ap.add_argument("--doublet-levels", default=None,
+                    help="comma-separated levels at which the reference's maneuvers are also trained (default: all)")
+    ap.add_argument("--turbulence-schedule", action="store_true",
+                    help="development: also train every node at every level and store the thresholds scheduled on "
+                         "the estimated turbulence (fdi_sim.bank.turbulence); not the shipped atlas")
     a = ap.parse_args(argv)
     out = a.out or atlas_path(a.aircraft)
-    doc = make_atlas(a.aircraft, out, workers=a.workers)
+    levels = None if a.doublet_levels is None else [x.strip() for x in a.doublet_levels.split(",") if x.strip()]
+    doc = make_atlas(a.aircraft, out, workers=a.workers, schedule=a.turbulence_schedule, doublet_levels=levels)
     ok = sum(n["status"] == "ok" for n in doc["nodes"])
     print(f"{out}: {ok} of {len(doc['nodes'])} nodes calibrated, {len(doc['entries'])} entries")
     return 0

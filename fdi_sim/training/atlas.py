@@ -54,8 +54,23 @@ ATLAS_FILE = "fdi_atlas.json"
 #: linearization of the same code differ by far less. A design change that matters (a new default,
 #: another linearizer) moves the matrices by more than this.
 DESIGN_RTOL = 1e-4
-#: the calibrated design conditions (the shipped studies' ``[bank] design``)
-CONDITIONS: Mapping[str, Any] = {"point": "grid", "turbulence": "moderate", "wind_speed_kts": 0.0, "noise_scale": 1.0}
+#: the calibrated design conditions: the grid node, no wind, noise scale 1, and the flight's turbulence
+#: level where the atlas has it (:data:`LEVELS`), else the nearest below (:func:`design_turbulence`)
+CONDITIONS: Mapping[str, Any] = {"point": "grid", "wind_speed_kts": 0.0, "noise_scale": 1.0}
+#: the turbulence levels the atlas is made for: those the kinematic checks have a design for
+#: (fdi_sim.detectors.catalogue_kinematic.LEVELS); a severe flight is designed at moderate
+LEVELS = ("none", "light", "moderate")
+
+
+#: the atlas's flights: the reference scenario's pulse-train maneuvers ("doublets"), or none
+#: ("steady"), for a flight that flies none (in calm air the doublets' responses, which a linear
+#: model does not follow exactly, set the gust filter's threshold)
+MANEUVERS = ("steady", "doublets")
+
+
+def design_turbulence(level: str) -> str:
+    """The atlas level a flight in ``level`` is designed at: its own, or moderate for severe."""
+    return level if level in LEVELS else LEVELS[-1]
 #: fixed projection vectors of the fingerprints (a constant basis, not randomness of a run)
 _FP_BASIS_KEY = 20261204
 _FP_PROJECTIONS = 4
@@ -131,6 +146,10 @@ class AtlasNode:
     ----------
     h_ft, vc_kts, flaps_deg : float
         The node [ft], [kt], [deg].
+    turbulence : str
+        The design's turbulence level (:data:`LEVELS`).
+    maneuvers : str
+        The training flights' maneuvers (:data:`MANEUVERS`).
     design_digest : str
         :func:`scenario_digest` of the calibrated design scenario made there.
     status : str
@@ -141,6 +160,8 @@ class AtlasNode:
     h_ft: float
     vc_kts: float
     flaps_deg: float
+    turbulence: str
+    maneuvers: str
     design_digest: str
     status: str
 
@@ -191,7 +212,8 @@ class Atlas:
                                "conditions": dict(self.conditions), "training": self.training,
                                "commit": self.stamp.get("commit"), "made": self.stamp.get("date")}
         if node is not None:
-            out["node"] = {"h_ft": node.h_ft, "vc_kts": node.vc_kts, "flaps_deg": node.flaps_deg}
+            out["node"] = {"h_ft": node.h_ft, "vc_kts": node.vc_kts, "flaps_deg": node.flaps_deg,
+                           "turbulence": node.turbulence, "maneuvers": node.maneuvers}
         return out
 
 
@@ -219,8 +241,8 @@ def read_atlas(path: Path, aircraft: str | None = None) -> Atlas:
         raise DesignError(f"{path}: key 'aircraft' is {d.get('aircraft')!r}, this flight's aircraft is {aircraft!r}: "
                           f"an atlas of another aircraft; put the {aircraft}'s atlas at {atlas_path(aircraft)}")
     try:
-        nodes = tuple(AtlasNode(float(n["h_ft"]), float(n["vc_kts"]), float(n["flaps_deg"]), str(n["design_digest"]),
-                                str(n["status"])) for n in d["nodes"])
+        nodes = tuple(AtlasNode(float(n["h_ft"]), float(n["vc_kts"]), float(n["flaps_deg"]), str(n["turbulence"]),
+                                str(n["maneuvers"]), str(n["design_digest"]), str(n["status"])) for n in d["nodes"])
         return Atlas(Path(path), str(d["aircraft"]), str(d["reference"]), dict(d["envelope"]), dict(d["conditions"]),
                      str(d["training"]), dict(d.get("stamp", {})), nodes, dict(d["entries"]))
     except (KeyError, TypeError, ValueError) as exc:
@@ -270,8 +292,8 @@ def lookup(aircraft: str, kind: str, key: str, fp: Sequence[Sequence[float]]) ->
     if not dist <= DESIGN_RTOL:
         return None, (f"{atlas.path}: the {kind} entry's design differs from this one by {dist:.2g} (relative), more "
                       f"than {DESIGN_RTOL:g}: a changed design; regenerate the atlas")
-    h, v, fl = e["node"]
-    node = next((n for n in atlas.nodes if (n.h_ft, n.vc_kts, n.flaps_deg) == (h, v, fl)), None)
+    key_node = tuple(e["node"])
+    node = next((n for n in atlas.nodes if (n.h_ft, n.vc_kts, n.flaps_deg, n.turbulence, n.maneuvers) == key_node), None)
     return {"entry": e["entry"], "node": e["node"], "distance": dist, "atlas": atlas.summary(node)}, ""
 
 

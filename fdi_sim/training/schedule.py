@@ -465,7 +465,7 @@ def atlas_design(sc: Scenario) -> tuple[Scenario | None, str]:
     cover the flight (none shipped, a flight crossing several schedule points, a node or settings
     the atlas was not made for).
     """
-    from fdi_sim.training.atlas import CONDITIONS, load_atlas, scenario_digest
+    from fdi_sim.training.atlas import load_atlas, scenario_digest
 
     atlas = load_atlas(sc.aircraft)
     if atlas is None:
@@ -475,20 +475,35 @@ def atlas_design(sc: Scenario) -> tuple[Scenario | None, str]:
         if len(pts) > 1:
             return None, (f"the flight crosses {len(pts)} schedule points ({'; '.join(p.label() for p in pts[:4])}"
                           f"{'; ...' if len(pts) > 4 else ''}): the atlas covers flights at one node")
+    own = json.loads(sc.to_json()).get("maneuvers", [])
+    if own:
+        from fdi_sim.scenario.loader import load
+        from fdi_sim.scenario.shipped import shipped_dir
+
+        ref = json.loads(load(shipped_dir() / f"{atlas.reference}.toml").to_json()).get("maneuvers", [])
+        if own != ref:  # thresholds come from flights with the flight's own maneuvers, or none
+            return None, (f"the flight's maneuvers are neither none nor {atlas.reference}'s (those of the atlas's "
+                          "training flights; in calm air the gust filter's threshold depends on them)")
     des = calibrated_design(sc, atlas.reference)
     node = atlas.node_for(scenario_digest(json.loads(des.to_json())))
     ini = sc.model.initial
     h, vc = des.model.initial.h_ft, des.model.initial.vc_kts
-    where = f"node h {h:g} ft, vc {vc:g} kt, flaps {float(ini.flaps_deg):g} deg"
+    level = des.model.atmosphere.turbulence
+    man = "doublets" if des.maneuvers else "steady"
+    where = f"node h {h:g} ft, vc {vc:g} kt, flaps {float(ini.flaps_deg):g} deg, {level} turbulence, {man} flights"
     if node is None:
-        inside = any((n.h_ft, n.vc_kts, n.flaps_deg) == (h, vc, float(ini.flaps_deg)) for n in atlas.nodes)
+        inside = any((n.h_ft, n.vc_kts, n.flaps_deg, n.turbulence, n.maneuvers) == (h, vc, float(ini.flaps_deg),
+                                                                                  level, man) for n in atlas.nodes)
         why = ("its sensors, simulation rate or [fdi] settings differ from those the atlas was made with"
                if inside else f"the atlas has no such node (its envelope: {atlas.envelope})")
         return None, f"{atlas.path} does not cover this flight ({where}): {why}"
     if node.status != "ok":
         return None, f"{atlas.path}: {where} has no calibration ({node.status})"
-    return des, (f"calibrated design of {atlas.path} at {where} ({atlas.reference}'s flights, "
-                 f"{CONDITIONS['turbulence']} turbulence, no wind, noise scale 1; {atlas.training})")
+    told = sc.model.atmosphere.turbulence
+    flights = f"{atlas.reference}'s maneuvers, as the flight's" if des.maneuvers else "no maneuvers, as the flight"
+    return des, (f"calibrated design of {atlas.path} at {where} (training flights: {flights}, no wind, noise "
+                 f"scale 1; {atlas.training}; the turbulence level is the scenario's"
+                 + ("" if told == level else f" ({told}: the atlas's nearest level below)") + ")")
 
 
 def calibrated_design(sc: Scenario, reference: str) -> Scenario:
@@ -499,11 +514,13 @@ def calibrated_design(sc: Scenario, reference: str) -> Scenario:
     (:mod:`fdi_sim.study.atlas`), so it depends on nothing else of the flight."""
     from fdi_sim.scenario.loader import load
     from fdi_sim.scenario.shipped import shipped_dir
-    from fdi_sim.training.atlas import CONDITIONS
+    from fdi_sim.training.atlas import CONDITIONS, design_turbulence
 
     ref = load(shipped_dir() / f"{reference}.toml")
     data = json.loads(ref.to_json())
     flight = json.loads(sc.to_json())
+    if not sc.maneuvers:  # a flight without maneuvers: steady training flights (fdi_sim.training.atlas.MANEUVERS)
+        data["maneuvers"] = []
     ini = sc.model.initial
     data["initial"] = {**data["initial"], "h_ft": float(ini.h_ft), "vc_kts": initial_vc_kts(sc), "vt_kts": None,
                        "flaps_deg": float(ini.flaps_deg)}
@@ -512,7 +529,8 @@ def calibrated_design(sc: Scenario, reference: str) -> Scenario:
             data[k] = flight[k]
         else:
             data.pop(k, None)
-    data["fdi"] = {**flight.get("fdi", {}), "design": dict(CONDITIONS)}
+    data["fdi"] = {**flight.get("fdi", {}), "design": {**CONDITIONS,
+                                                       "turbulence": design_turbulence(sc.model.atmosphere.turbulence)}}
     data["faults"] = []
     return _design_scenario(from_dict(data, source=f"{sc.source} (calibrated design on {reference})"))
 

@@ -24,6 +24,7 @@ from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import design_hash
 from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
+from fdi_sim.bank.turbulence import ThresholdSchedule
 from fdi_sim.training.schedule import design_scenario
 from fdi_sim.units import S_PER_H
 
@@ -311,6 +312,8 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
     atlas_record("bank", akey, afp, {k: v for k, v in rec.items() if k != "atlas"})
     for mem, r in zip(bank.members, rec["members"]):
         mem.set_threshold(float(r["threshold"]))
+    schedule = rec.get("schedule")
+    bank.set_schedule(ThresholdSchedule.from_dict(schedule) if schedule else None)
     bank.calibration = rec
     bank.keep_trace(False)  # the replays kept every block; a flight must not
     bank.reset()
@@ -330,6 +333,8 @@ def _replay_log(bank: Any, log: Any, *, raw_thresholds: bool = False) -> None:
     if TOPIC_SENSORS_VALID in log.topics:
         vt = log.topics[TOPIC_SENSORS_VALID]
         valid = np.column_stack([vt[nm][:K] > 0.5 if nm in vt.fields else np.ones(K, bool) for nm in bank.meas_names])
+    if raw_thresholds:
+        bank.set_schedule(None)  # the statistic itself, at no threshold
     bank.reset()
     bank.keep_trace(True)
     if raw_thresholds:
@@ -338,3 +343,18 @@ def _replay_log(bank: Any, log: Any, *, raw_thresholds: bool = False) -> None:
     dt = float(np.median(np.diff(np.asarray(meas.t_s[:K]))))
     bank.replay(u, y, valid, dt, t_rows_s=np.asarray(meas.t_s[:K], dtype=float))
 
+
+
+def sample_signal(bank: Any, log: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """A measurement at the bank's samples of a log, and whether each is usable: the rows
+    :func:`_replay_log` gives the bank (``FdiBank.replay``: every ``n``-th row from the ``n``-th)."""
+    from fdi_sim.flightlog import TOPIC_COMMANDS, TOPIC_SENSORS, TOPIC_SENSORS_VALID
+
+    meas = log.topics[TOPIC_SENSORS]
+    K = min(len(log.topics[TOPIC_COMMANDS].t_s), len(meas.t_s))
+    rows = bank.n * np.arange(1, (K - 1) // bank.n + 1)
+    z = np.asarray(meas[name][:K], dtype=float)[rows]
+    ok = np.isfinite(z)
+    if TOPIC_SENSORS_VALID in log.topics and name in log.topics[TOPIC_SENSORS_VALID].fields:
+        ok &= np.asarray(log.topics[TOPIC_SENSORS_VALID][name][:K])[rows] > 0.5
+    return z, ok

@@ -16,7 +16,7 @@ from fdi_sim.scenario import loads
 from fdi_sim.training import atlas as atlas_mod
 from fdi_sim.training import fly
 from fdi_sim.training.atlas import (
-    DESIGN_RTOL, atlas_path, fingerprint, fingerprint_distance, load_atlas, read_atlas,
+    DESIGN_RTOL, LEVELS, MANEUVERS, atlas_path, fingerprint, fingerprint_distance, load_atlas, read_atlas,
 )
 from fdi_sim.training.schedule import atlas_design, design_choice
 
@@ -62,15 +62,21 @@ def test_shipped_atlas_covers_its_envelope(aircraft):
 
     at = load_atlas(aircraft)
     assert at is not None, f"no atlas at {atlas_path(aircraft)}: `python -m fdi_sim.study.atlas {aircraft}`"
-    made = {(n.h_ft, n.vc_kts) for n in at.nodes}
-    assert made == set(envelope_nodes(aircraft)), "the atlas was made for another envelope: regenerate it"
+    made = {(n.h_ft, n.vc_kts, n.turbulence, n.maneuvers) for n in at.nodes}
+    # steady flights at every level; the reference's maneuvers at least at moderate (the studies' design)
+    want = {(h, v, lv, "steady") for h, v in envelope_nodes(aircraft) for lv in LEVELS}
+    want |= {(h, v, "moderate", "doublets") for h, v in envelope_nodes(aircraft)}
+    assert want <= made, "the atlas was made for another envelope or other levels: regenerate it"
+    assert {m for *_, m in made} <= set(MANEUVERS) and {lv for _, _, lv, _ in made} <= set(LEVELS)
+    assert len({(lv, mv) for _, _, lv, mv in made}) * len(envelope_nodes(aircraft)) == len(made)
     ok = [n for n in at.nodes if n.status == "ok"]
     assert len(ok) >= 0.9 * len(at.nodes), [n.status for n in at.nodes if n.status != "ok"]
     # every calibrated node holds both entries: the gust filter's calibration and the thresholds
-    kinds = {tuple(e["node"][:2]): set() for e in at.entries.values()}
+    kinds: dict[tuple, set] = {}
     for k, e in at.entries.items():
-        kinds[tuple(e["node"][:2])].add(k.split(":")[0])
-    assert all(kinds.get((n.h_ft, n.vc_kts)) == {"gust", "bank"} for n in ok)
+        h, v, _, lv, mv = e["node"]
+        kinds.setdefault((h, v, lv, mv), set()).add(k.split(":")[0])
+    assert all(kinds.get((n.h_ft, n.vc_kts, n.turbulence, n.maneuvers)) == {"gust", "bank"} for n in ok)
 
 
 def test_new_scenario_flies_with_no_training_flight_and_its_log_names_the_calibration(tmp_path, no_training):
@@ -81,7 +87,8 @@ def test_new_scenario_flies_with_no_training_flight_and_its_log_names_the_calibr
     log = read_log(res.log_path)
     cal = json.loads(log.metadata["fdi"]["calibration"])
     assert cal["source"] == "atlas", cal.get("source")
-    assert cal["atlas"]["node"] == {"h_ft": 6000.0, "vc_kts": des.model.initial.vc_kts, "flaps_deg": 0.0}
+    assert cal["atlas"]["node"] == {"h_ft": 6000.0, "vc_kts": des.model.initial.vc_kts, "flaps_deg": 0.0,
+                                    "turbulence": "light", "maneuvers": "steady"}
     assert cal["atlas"]["file"].endswith("f16/fdi_atlas.json")
     assert "calibrated design of" in cal["design"]
     notes = json.loads(log.metadata["fdi"]["notes"])
@@ -93,6 +100,14 @@ def test_dhc6_new_scenario_takes_its_calibration_from_the_atlas(tmp_path, no_tra
     res = fly(loads(NEW_DHC6, "holdout_dhc6.toml"), tmp_path / "runs", progress=False)
     cal = json.loads(read_log(res.log_path).metadata["fdi"]["calibration"])
     assert cal["source"] == "atlas" and cal["atlas"]["node"]["h_ft"] == 6000.0
+    assert cal["atlas"]["node"]["turbulence"] == "none" and cal["atlas"]["node"]["maneuvers"] == "steady"
+
+
+def test_a_severe_flight_is_designed_at_moderate_and_says_so():
+    sc = loads(NEW_F16.replace('turbulence = "light"', 'turbulence = "severe"'), "severe.toml")
+    des, note = design_choice(sc)
+    assert des.model.atmosphere.turbulence == "moderate"
+    assert "severe: the atlas's nearest level below" in note
 
 
 def test_outside_the_atlas_the_log_says_why():
@@ -112,6 +127,24 @@ rate_fps = 50.0
     sc = loads(climb, "climb.toml")
     des, why = design_choice(sc)
     assert des is sc and "schedule points" in why and why.startswith("designed at the flight's own point")
+    # other maneuvers than none or the reference's: the gust filter's calm-air threshold depends on them
+    dbl = NEW_F16.replace("[[faults]]", """[[maneuvers]]
+type = "doublet-v1"
+axis = "aileron"
+t_start_s = 8.0
+amplitude_norm = 0.08
+pulse_s = 1.0
+
+[[faults]]""")
+    des, why = atlas_design(loads(dbl, "dbl.toml"))
+    assert des is None and "maneuvers are neither none nor f16_cruise_doublets's" in why
+    # the reference's own maneuvers, in light air: the doublets variant
+    from fdi_sim.scenario.shipped import shipped_dir
+
+    text = (shipped_dir() / "f16_cruise_doublets.toml").read_text()
+    ref = loads(text.replace('turbulence = "moderate"', 'turbulence = "light"') + '\n[fdi]\nbank = "default"\n', "r.toml")
+    des, note = design_choice(ref)
+    assert "f16_cruise_doublets's maneuvers, as the flight's" in note and des.maneuvers
     # an explicit design is the user's: no atlas
     expl = NEW_F16.replace('bank = "default"', 'bank = "default"\ndesign = { point = "flight" }')
     sc = loads(expl, "expl.toml")
@@ -142,7 +175,7 @@ def test_a_changed_design_is_not_taken_from_the_atlas(tmp_path, no_training, mon
     from fdi_sim.detectors.catalogue_observers import make_gust_kalman
 
     lm = model_for_scenario(des, 20.0)
-    params = {"turbulence": "moderate"}
+    params = {"turbulence": "light"}  # a calm-air design carries small gust states (fdi_sim.training.gust)
     det = make_gust_kalman(lm.continuous(), rate_hz=20.0, sim_rate_hz=des.model.rate_hz, **params)
     n_samples = 24 * 295.0 * 20.0
     key, fp = calibration_atlas_key(des, det.design, params, 20.0, 24, 300.0, max(1e-4, 20.0 / n_samples))
