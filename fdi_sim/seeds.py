@@ -93,6 +93,10 @@ REGISTRY: tuple[SeedSet, ...] = (
     SeedSet("envelope-hold-out", "hold-out", (15001, 15002),
             ("studies/f16_envelope_hold_out", "studies/dhc6_envelope_hold_out"),
             "fault-free studies across each aircraft's envelope, light to severe turbulence (issue 24's bar)"),
+    SeedSet("envelope-development", "development", (15101, 15102),
+            ("studies/f16_envelope_development", "studies/dhc6_envelope_development"),
+            "the envelope hold-out studies' development twins: looked at freely while the bank's turbulence "
+            "handling is made"),
     SeedSet("atlas-hold-out-scenarios", "hold-out", (90417, 90418),
             ("tests/data/holdout/holdout_f16_roll_gyro_bias_7500ft.toml",
              "tests/data/holdout/holdout_dhc6_calm_6900ft.toml"),

@@ -53,6 +53,21 @@ CLIP_G = 3.0
 #: the anchor of each level: this quantile of the estimate over that level's armed training samples
 ANCHOR_QUANTILE = 0.05
 LEVELS = ("none", "light", "moderate", "severe")
+#: the reference of the power schedule (:func:`power_schedule`): this quantile of the estimate over
+#: the armed samples of flights at the design conditions; rougher air raises the thresholds
+REFERENCE_QUANTILE = 0.9
+#: per member, the exponent of the power schedule: threshold x (sigma / sigma_ref)^gamma above the
+#: reference. Measured on development seeds 201-203 (300 s, noise 0.7/1.0/1.3) at the moderate
+#: design of F-16 6000 ft / 360 kt and 12000 ft / 340 kt and DHC-6 4000 ft / 112 kt: the 3-of-5 peak
+#: of statistic/threshold from moderate to severe against the estimate's ratio gave gamma 2.0-2.1
+#: (airspeed, flow angles; F-16) and 4.8-6.4 (gust filter; F-16); the DHC-6's needed 0.9 and 3.6. The
+#: larger values are taken. The attitude check moves less (peak ratio 1.29-1.42 for an estimate ratio
+#: of 1.58: gamma 0.6-0.8; its severe-air false alarms in the F-16 envelope development study, seed
+#: 15101, 51 in 4.2 h, made it 1.0); the altitude check does not move (0).
+EXPONENTS: Mapping[str, float] = {"kalman-gust-v1": 5.0, "kinematic-airspeed-v1": 2.4, "kinematic-flow-angles-v1": 2.4,
+                                  "kinematic-attitude-v1": 1.0}
+#: the power schedule's second anchor, this many times the reference (held beyond) [-]
+POWER_SPAN = 8.0
 
 
 @dataclass(frozen=True)
@@ -177,3 +192,25 @@ def anchors(series: Sequence[NDArray[np.float64]], arm_samples: int) -> float:
     if x.size == 0:
         raise DesignError("no finite turbulence estimate on the training flights (no usable nz_g)")
     return float(np.quantile(x, ANCHOR_QUANTILE))
+
+
+def power_schedule(thresholds: Mapping[str, float], sigma_ref: float, exponents: Mapping[str, float] = EXPONENTS,
+                   *, tau_s: float = TAU_S, clip: float = CLIP_G, signal: str = SIGNAL) -> ThresholdSchedule | None:
+    """Thresholds that hold below the reference and rise as ``(sigma / sigma_ref)^gamma`` above it
+    (two anchors, ``sigma_ref`` and :data:`POWER_SPAN` times it: the log-log interpolation between
+    them is that power law), for the members with an exponent; None when no member has one."""
+    rows = {mid: (float(c), float(c) * POWER_SPAN ** float(exponents[mid]))
+            for mid, c in thresholds.items() if float(exponents.get(mid, 0.0)) > 0 and np.isfinite(c)}
+    if not rows:
+        return None
+    return ThresholdSchedule(signal, tau_s, clip, ("reference", f"{POWER_SPAN:g} x reference"),
+                             (float(sigma_ref), float(sigma_ref) * POWER_SPAN), rows)
+
+
+def reference_sigma(series: Sequence[NDArray[np.float64]], arm_samples: int) -> float:
+    """:data:`REFERENCE_QUANTILE` of the estimate over the armed samples of flights at the design conditions."""
+    x = np.concatenate([np.asarray(s[arm_samples:], dtype=float) for s in series])
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        raise DesignError("no finite turbulence estimate on the reference flights (no usable nz_g)")
+    return float(np.quantile(x, REFERENCE_QUANTILE))

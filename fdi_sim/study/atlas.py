@@ -248,6 +248,76 @@ def make_atlas(aircraft: str, out: Path, *, workers: int = 2, progress: bool = T
     return doc
 
 
+REFERENCE_FLIGHTS = 2
+REFERENCE_DURATION_S = 120.0
+
+
+def reference_task(aircraft: str, h_ft: float, vc_kts: float, turbulence: str, maneuvers: str,
+                   cache: str) -> dict[str, Any]:
+    """One node and variant (in a worker): the turbulence estimate's reference on
+    :data:`REFERENCE_FLIGHTS` fault-free flights of :data:`REFERENCE_DURATION_S` at its calibrated
+    design (the first training seeds), for :func:`fdi_sim.bank.turbulence.power_schedule`."""
+    os.environ["FDI_SIM_CACHE"] = cache
+    os.environ["FDI_SIM_ATLAS"] = "off"
+    from types import SimpleNamespace
+
+    from fdi_sim.detectors.samples import decimation
+    from fdi_sim.training.flights import fly_training, training_seeds
+    from fdi_sim.training.schedule import calibrated_design
+    from fdi_sim.training.thresholds import turbulence_reference
+
+    des = calibrated_design(node_flight(aircraft, h_ft, vc_kts, turbulence, maneuvers), ENVELOPES[aircraft]["reference"])
+    f = des.model.fdi
+    logs = fly_training(des, training_seeds(REFERENCE_FLIGHTS), REFERENCE_DURATION_S, progress=False)
+    probe = SimpleNamespace(n=decimation(float(des.model.rate_hz), float(f.rate_hz)), rate_hz=float(f.rate_hz),
+                            arm_samples=int(round(f.arm_s * f.rate_hz)))
+    ref = turbulence_reference(probe, logs, f"{REFERENCE_FLIGHTS} fault-free flights of {REFERENCE_DURATION_S:g} s "
+                                            "at the calibrated design (the first training seeds)")
+    return {"node": [h_ft, vc_kts, float(des.model.initial.flaps_deg), turbulence, maneuvers], "reference": ref}
+
+
+def add_turbulence_reference(aircraft: str, path: Path, *, workers: int = 2, progress: bool = True) -> int:
+    """Put the turbulence reference of every calibrated node and variant into the atlas file's
+    thresholds entries (:func:`reference_task`); returns how many entries got one."""
+    from distributed import as_completed
+
+    from fdi_sim.study.execute import _client
+    from fdi_sim.training.cache import cache_dir
+
+    doc = json.loads(path.read_text())
+    cache = str(cache_dir().parent / "atlas-build" / aircraft)
+    todo = [n for n in doc["nodes"] if n["status"] == "ok"]
+    client, cluster = _client(workers, None)
+    out: dict[tuple, Any] = {}
+    t0 = time.perf_counter()
+    try:
+        futs = [client.submit(reference_task, aircraft, n["h_ft"], n["vc_kts"], n["turbulence"], n["maneuvers"], cache,
+                              pure=False) for n in todo]
+        for i, fut in enumerate(as_completed(futs, loop=client.loop), 1):
+            r = fut.result()
+            out[tuple(r["node"])] = r["reference"]
+            if progress:
+                print(f"atlas {aircraft} turbulence reference: {i}/{len(futs)} {r['node']}: "
+                      f"{r['reference']['sigma_ref']:.4g} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    n = 0
+    for k, e in doc["entries"].items():
+        ref = out.get(tuple(e["node"]))
+        if k.startswith("bank:") and ref is not None:
+            e["entry"]["turbulence_reference"] = ref
+            n += 1
+    for node in doc["nodes"]:
+        ref = out.get((node["h_ft"], node["vc_kts"], node["flaps_deg"], node["turbulence"], node["maneuvers"]))
+        node["sigma_ref"] = ref["sigma_ref"] if ref else None
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(doc, indent=None, separators=(",", ":")) + "\n")
+    os.replace(tmp, path)
+    return n
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     from fdi_sim.training.atlas import atlas_path
 
@@ -260,10 +330,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--turbulence-schedule", action="store_true",
                     help="development: also train every node at every level and store the thresholds scheduled on "
                          "the estimated turbulence (fdi_sim.bank.turbulence); not the shipped atlas")
+    ap.add_argument("--turbulence-reference-only", action="store_true",
+                    help="only add the turbulence estimate's reference to an existing atlas's entries")
     a = ap.parse_args(argv)
     out = a.out or atlas_path(a.aircraft)
+    if a.turbulence_reference_only:
+        n = add_turbulence_reference(a.aircraft, out, workers=a.workers)
+        print(f"{out}: turbulence reference in {n} thresholds entries")
+        return 0
     levels = None if a.doublet_levels is None else [x.strip() for x in a.doublet_levels.split(",") if x.strip()]
     doc = make_atlas(a.aircraft, out, workers=a.workers, schedule=a.turbulence_schedule, doublet_levels=levels)
+    add_turbulence_reference(a.aircraft, out, workers=a.workers)
     ok = sum(n["status"] == "ok" for n in doc["nodes"])
     print(f"{out}: {ok} of {len(doc['nodes'])} nodes calibrated, {len(doc['entries'])} entries")
     return 0

@@ -23,7 +23,8 @@ from fdi_sim.bank.members import per_sample_target
 from fdi_sim.training.flights import LazyTraining
 from fdi_sim.training.schedule import design_choice
 from fdi_sim.training.thresholds import (
-    MemberThresholdError, _replay_log, apply_study_thresholds, calibrate_thresholds, note_no_match, thresholds_source,
+    MemberThresholdError, _replay_log, apply_study_thresholds, apply_turbulence_schedule, calibrate_thresholds,
+    note_no_match, thresholds_source,
 )
 from fdi_sim.scenario.loader import from_dict
 from fdi_sim.threads import single_blas_thread
@@ -121,6 +122,7 @@ def _set_thresholds(sc: Scenario, bank: Any, logs: Any, progress: bool, design_n
     else:
         calibrate_thresholds(sc, bank, p, training_logs=logs, progress=progress)
         bank.calibration = {**bank.calibration, "source": _trained_source(bank)}
+    apply_turbulence_schedule(sc, bank, p)
     if design_note:
         bank.calibration = {**bank.calibration, "design": design_note}
 

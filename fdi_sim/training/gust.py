@@ -85,8 +85,6 @@ def gust_kalman_calibration(sc: Scenario, model: Any, *, rate_hz: float = 20.0,
                     cached = cal.sigma_m.shape == (det.design.model.n_outputs,) * 2
                 except (ValueError, KeyError, TypeError):
                     cal, cached = None, False
-                if cached:
-                    write_entry(path, cal.to_dict(), use_cache)
         if not cached:
             seeds = training_seeds(n_flights)
             if training_logs is not None:

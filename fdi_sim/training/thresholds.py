@@ -24,7 +24,9 @@ from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import design_hash
 from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
-from fdi_sim.bank.turbulence import ThresholdSchedule
+from fdi_sim.bank.turbulence import (
+    CLIP_G, REFERENCE_QUANTILE, SIGNAL, TAU_S, ThresholdSchedule, power_schedule, reference_sigma, turbulence_series,
+)
 from fdi_sim.training.schedule import design_scenario
 from fdi_sim.units import S_PER_H
 
@@ -254,14 +256,15 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
         try:
             if rec is not None and [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
                 rec = None
+            if rec is not None and "atlas" in rec:
+                rec = None  # an atlas entry copied by an earlier version: the atlas itself is read instead
         except (KeyError, TypeError):
             rec = None  # a damaged entry is recomputed
         akey, afp = _thresholds_atlas_key(sc, bank, p)
         if rec is None and use_cache:  # the shipped atlas: the same entry, made by the project
             hit, _ = atlas_lookup(sc.aircraft, "bank", akey, afp)
             if hit is not None and [r.get("id") for r in hit["entry"].get("members", [])] == [m.id for m in bank.members]:
-                rec = {**hit["entry"], "atlas": hit["atlas"]}
-                write_entry(path, rec, use_cache)
+                rec = {**hit["entry"], "atlas": hit["atlas"]}  # not copied to the cache: the atlas may be remade
         if rec is None:
             logs = training_logs
             if logs is None:
@@ -308,6 +311,8 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                                                f"to {float(x.max()):.3g}): it diverges on this aircraft here")
                 rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
                                        "max_training": float(x.max()) if x.size else None})
+            if SIGNAL in bank.meas_names:  # where rougher air begins (fdi_sim.bank.turbulence.power_schedule)
+                rec["turbulence_reference"] = turbulence_reference(bank, logs, f"{len(logs)} training flights")
             write_entry(path, rec, use_cache)
     atlas_record("bank", akey, afp, {k: v for k, v in rec.items() if k != "atlas"})
     for mem, r in zip(bank.members, rec["members"]):
@@ -358,3 +363,40 @@ def sample_signal(bank: Any, log: Any, name: str) -> tuple[np.ndarray, np.ndarra
     if TOPIC_SENSORS_VALID in log.topics and name in log.topics[TOPIC_SENSORS_VALID].fields:
         ok &= np.asarray(log.topics[TOPIC_SENSORS_VALID][name][:K])[rows] > 0.5
     return z, ok
+
+
+def turbulence_reference(bank: Any, logs: Sequence[Any], flights: str) -> dict[str, Any]:
+    """The turbulence estimate's reference on flights at the design conditions
+    (:func:`fdi_sim.bank.turbulence.reference_sigma`), as a thresholds record keeps it."""
+    series = [turbulence_series(*sample_signal(bank, lg, SIGNAL), bank.rate_hz) for lg in logs]
+    return {"signal": SIGNAL, "tau_s": TAU_S, "clip": CLIP_G, "quantile": REFERENCE_QUANTILE,
+            "sigma_ref": reference_sigma(series, bank.arm_samples), "flights": flights}
+
+
+def apply_turbulence_schedule(sc: Scenario, bank: Any, p: float) -> str:
+    """Raise the members' thresholds with the estimated turbulence above their calibration's
+    (:func:`fdi_sim.bank.turbulence.power_schedule`), from the reference the thresholds record
+    keeps, or for a study's file the atlas's record of the same design; a note for the log ("" when
+    none applies: no reference, a schedule already set, or no nz_g)."""
+    from fdi_sim.training.atlas import lookup as atlas_lookup
+
+    cal = bank.calibration or {}
+    if bank.schedule is not None or SIGNAL not in bank.meas_names:
+        return ""
+    ref = cal.get("turbulence_reference")
+    if ref is None and cal.get("source") == "study":
+        akey, afp = _thresholds_atlas_key(sc, bank, p)
+        hit, _ = atlas_lookup(sc.aircraft, "bank", akey, afp)
+        ref = hit["entry"].get("turbulence_reference") if hit is not None else None
+    if ref is None:
+        return ""
+    sch = power_schedule({m.id: m.threshold for m in bank.members}, float(ref["sigma_ref"]))
+    if sch is None:
+        return ""
+    bank.set_schedule(sch)
+    note = (f"thresholds raised as (sigma / {float(ref['sigma_ref']):.3g})^gamma above the {SIGNAL} increments' "
+            f"reference ({ref.get('flights', '')}; gamma " + ", ".join(
+                f"{k} {float(np.log(v[1] / v[0]) / np.log(sch.sigma[1] / sch.sigma[0])):g}"
+                for k, v in sch.thresholds.items()) + ")")
+    bank.calibration = {**cal, "turbulence": {**sch.to_dict(), "reference": ref, "note": note}}
+    return note

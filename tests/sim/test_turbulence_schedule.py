@@ -97,3 +97,16 @@ def test_a_bank_replaying_a_log_schedules_as_the_generation_computes(tmp_path, m
     assert np.all(other == other[0])  # a member the schedule does not name keeps its threshold
     with pytest.raises(DesignError, match="does not measure"):
         bank.set_schedule(ThresholdSchedule("no_such", 30.0, 3.0, ("a",), (1.0,), {"kinematic-attitude-v1": (1.0,)}))
+
+
+def test_the_power_schedule_holds_below_the_reference_and_rises_as_its_power_above():
+    from fdi_sim.bank.turbulence import POWER_SPAN, power_schedule
+
+    sch = power_schedule({"kalman-gust-v1": 400.0, "kinematic-altitude-v1": 4.0, "kinematic-airspeed-v1": 10.0}, 0.5)
+    assert set(sch.thresholds) == {"kalman-gust-v1", "kinematic-airspeed-v1"}  # the altitude check has no exponent
+    sig = np.array([0.1, 0.5, 0.75, 1.0, 0.5 * POWER_SPAN, 100.0])
+    out = np.empty(sig.size)
+    scheduled_threshold(sig, *sch.log_tables("kinematic-airspeed-v1"), out)
+    want = 10.0 * np.maximum(1.0, np.minimum(sig, 0.5 * POWER_SPAN) / 0.5) ** 2.4
+    assert np.allclose(out, want, rtol=1e-12)
+    assert power_schedule({"kinematic-altitude-v1": 4.0}, 0.5) is None
