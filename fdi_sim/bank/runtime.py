@@ -150,7 +150,7 @@ class _Member:
         self.estimates_actuators = isinstance(stream, EstimatesActuators)
         self.keep = False
         self.j_start = 0
-        self.sched: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # (log sigma, log threshold)
+        self.sched: tuple[NDArray[np.float64], ...] | None = None  # (log sigma, log threshold, threshold)
         self.reset()
 
     @property
@@ -197,7 +197,7 @@ class _Member:
             self.j_start = int(self.stream.samples_seen)
         self.stream.process_block(t[:S] if S != t.shape[0] else t, u, y, ok, fresh, out)
         if self.sched is not None and sigma is not None:  # thresholds on the estimated turbulence
-            scheduled_threshold(sigma, self.sched[0], self.sched[1], out.threshold)
+            scheduled_threshold(sigma, self.sched[0], self.sched[1], self.sched[2], out.threshold)
         if unarmed:  # before the bank is armed the statistic is logged, never decided on
             out.valid[:unarmed] = False
         decide(out.statistic, out.threshold, out.valid, out.hypothesis, self.decision.k, self.angle_rule, self.ring,
@@ -352,7 +352,7 @@ class FdiBank:
         for m in self.members:
             if m.id in schedule.thresholds:
                 m.sched = schedule.log_tables(m.id)
-                m.set_threshold(float(np.exp(m.sched[1][0])))
+                m.set_threshold(float(m.sched[2][0]))
             else:
                 m.sched = None
         self.reset()

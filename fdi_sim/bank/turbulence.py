@@ -110,10 +110,11 @@ class ThresholdSchedule:
             if c.shape != s.shape or not np.all(c > 0):
                 raise DesignError(f"{mid}: a threshold per anchor, each positive; got {tuple(c)}")
 
-    def log_tables(self, member: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """``(log sigma, log threshold)`` of a member, the thresholds made non-decreasing."""
+    def log_tables(self, member: str) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``(log sigma, log threshold, threshold)`` of a member, the thresholds made non-decreasing
+        (the thresholds themselves too: at and beyond the ends they are used exactly)."""
         c = np.maximum.accumulate(np.asarray(self.thresholds[member], dtype=float))
-        return np.log(np.asarray(self.sigma, dtype=float)), np.log(c)
+        return np.log(np.asarray(self.sigma, dtype=float)), np.log(c), c
 
     def to_dict(self) -> dict[str, Any]:
         return {"signal": self.signal, "tau_s": self.tau_s, "clip": self.clip, "levels": list(self.levels),
@@ -154,19 +155,20 @@ def turbulence_estimate(z, ok, state, alpha_min, clip2, out):  # pragma: no cove
 
 
 @numba.njit(cache=True, nogil=True)
-def scheduled_threshold(sigma, log_s, log_c, out):  # pragma: no cover - compiled
-    """``out[j]``: the threshold at ``sigma[j]`` (log-log interpolation, held beyond the ends)."""
+def scheduled_threshold(sigma, log_s, log_c, c, out):  # pragma: no cover - compiled
+    """``out[j]``: the threshold at ``sigma[j]`` (log-log interpolation, held beyond the ends, where
+    the thresholds ``c`` are used as they are)."""
     L = log_s.shape[0]
     for j in range(sigma.shape[0]):
         s = sigma[j]
         if not (s > 0.0) or not math.isfinite(s):
-            out[j] = math.exp(log_c[L - 1]) if not (s <= 0.0) else math.exp(log_c[0])
+            out[j] = c[L - 1] if not (s <= 0.0) else c[0]
             continue
         ls = math.log(s)
         if ls <= log_s[0]:
-            out[j] = math.exp(log_c[0])
+            out[j] = c[0]
         elif ls >= log_s[L - 1]:
-            out[j] = math.exp(log_c[L - 1])
+            out[j] = c[L - 1]
         else:
             i = 0
             while log_s[i + 1] < ls:
