@@ -23,16 +23,21 @@ a running mean that becomes an exponential average of time constant ``tau_s`` (s
 usable when the bank arms). The clip keeps a step of a failed accelerometer from raising every
 threshold for ``tau_s``.
 
-Schedule (per member, :func:`scheduled_threshold`): each level ``L`` (none, light, moderate,
-severe) has an anchor ``sigma_L`` (the 5th percentile of the estimate over the armed samples of that
-level's training flights) and the member's threshold ``c_L`` trained on those flights (the tail
-method of :mod:`fdi_sim.training.thresholds`, the bank's share of the rate). Between anchors the
-threshold is interpolated linearly in ``(log sigma, log c)``; below the first and above the last it
-is held. The thresholds are made non-decreasing in ``sigma`` (a cumulative maximum), and the anchors
-sit low in their level's spread, so a flight of level ``L`` meets at least ``c_L`` almost always:
-the schedule errs towards fewer alarms. The cost is detection in rough air, and a lag of about
-``tau_s`` when the turbulence changes in flight (not covered by the calibration: its flights keep
-one level).
+Schedule (per member, :func:`scheduled_threshold`; the shipped one is :func:`power_schedule`):
+anchors ``sigma_L`` with the member's threshold ``c_L`` at each, interpolated linearly in
+``(log sigma, log c)`` and held below the first and above the last; the thresholds are made
+non-decreasing in ``sigma`` (a cumulative maximum). :func:`power_schedule` has two anchors: the
+calibrated threshold at the reference ``sigma_ref`` (the estimate's :data:`REFERENCE_QUANTILE` at the
+design conditions) and ``c (POWER_SPAN)^gamma`` at ``POWER_SPAN sigma_ref``: below the reference the
+calibrated threshold, above it the power law ``c (sigma / sigma_ref)^gamma``. The cost is detection
+in air rougher than the design's, and a lag of about ``tau_s`` when the turbulence changes in
+flight (not covered by the calibration: its flights keep one level).
+
+Measured, not kept: thresholds trained in each level on the moderate design's flights and
+interpolated between the levels' anchors suited the kinematic checks but not the gust filter (its
+calm-air thresholds with a moderate-air ``Sigma_m`` came out an order of magnitude above the
+moderate one: F-16 6000 ft / 360 kt, 88,601 calm and 72,893 light against 6,235), so a
+non-decreasing schedule over all levels made it deaf.
 """
 from __future__ import annotations
 
@@ -50,9 +55,6 @@ from fdi_sim.errors import DesignError
 SIGNAL = "nz_g"
 TAU_S = 30.0
 CLIP_G = 3.0
-#: the anchor of each level: this quantile of the estimate over that level's armed training samples
-ANCHOR_QUANTILE = 0.05
-LEVELS = ("none", "light", "moderate", "severe")
 #: the reference of the power schedule (:func:`power_schedule`): this quantile of the estimate over
 #: the armed samples of flights at the design conditions; rougher air raises the thresholds
 REFERENCE_QUANTILE = 0.9
@@ -80,30 +82,30 @@ class ThresholdSchedule:
         The measurement whose increments are averaged (``nz_g``).
     tau_s : float
         Averaging time constant [s].
-    clip : float
-        Largest increment counted [signal's unit].
+    clip_g : float
+        Largest increment counted [g].
     levels : tuple of str
         The anchors' names.
-    sigma : tuple of float
-        The anchors, ascending [signal's unit per sample].
+    sigma_g : tuple of float
+        The anchors, ascending: standard deviations of the increments [g].
     thresholds : mapping
         Member id -> its threshold at each anchor [-].
     """
 
     signal: str
     tau_s: float
-    clip: float
+    clip_g: float
     levels: tuple[str, ...]
-    sigma: tuple[float, ...]
+    sigma_g: tuple[float, ...]
     thresholds: Mapping[str, tuple[float, ...]]
 
     def __post_init__(self) -> None:
-        s = np.asarray(self.sigma, dtype=float)
+        s = np.asarray(self.sigma_g, dtype=float)
         if s.ndim != 1 or s.size < 1 or len(self.levels) != s.size or not np.all(np.isfinite(s)) or np.any(s <= 0):
             raise DesignError(f"a threshold schedule needs one positive finite anchor per level; got levels "
-                              f"{self.levels}, sigma {self.sigma}")
+                              f"{self.levels}, sigma_g {self.sigma_g}")
         if np.any(np.diff(s) <= 0):
-            raise DesignError(f"the schedule's anchors must rise with the level; got {dict(zip(self.levels, self.sigma))}"
+            raise DesignError(f"the schedule's anchors must rise with the level; got {dict(zip(self.levels, self.sigma_g))}"
                               " (two levels the estimate cannot tell apart)")
         for mid, c in self.thresholds.items():
             c = np.asarray(c, dtype=float)
@@ -114,20 +116,20 @@ class ThresholdSchedule:
         """``(log sigma, log threshold, threshold)`` of a member, the thresholds made non-decreasing
         (the thresholds themselves too: at and beyond the ends they are used exactly)."""
         c = np.maximum.accumulate(np.asarray(self.thresholds[member], dtype=float))
-        return np.log(np.asarray(self.sigma, dtype=float)), np.log(c), c
+        return np.log(np.asarray(self.sigma_g, dtype=float)), np.log(c), c
 
     def to_dict(self) -> dict[str, Any]:
-        return {"signal": self.signal, "tau_s": self.tau_s, "clip": self.clip, "levels": list(self.levels),
-                "sigma": list(self.sigma), "thresholds": {k: list(v) for k, v in self.thresholds.items()}}
+        return {"signal": self.signal, "tau_s": self.tau_s, "clip_g": self.clip_g, "levels": list(self.levels),
+                "sigma_g": list(self.sigma_g), "thresholds": {k: list(v) for k, v in self.thresholds.items()}}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> ThresholdSchedule:
-        return cls(str(d["signal"]), float(d["tau_s"]), float(d["clip"]), tuple(map(str, d["levels"])),
-                   tuple(map(float, d["sigma"])), {str(k): tuple(map(float, v)) for k, v in d["thresholds"].items()})
+        return cls(str(d["signal"]), float(d["tau_s"]), float(d["clip_g"]), tuple(map(str, d["levels"])),
+                   tuple(map(float, d["sigma_g"])), {str(k): tuple(map(float, v)) for k, v in d["thresholds"].items()})
 
     def describe(self) -> str:
         """One line for the log."""
-        a = ", ".join(f"{lv} {s:.3g}" for lv, s in zip(self.levels, self.sigma))
+        a = ", ".join(f"{lv} {s:.3g}" for lv, s in zip(self.levels, self.sigma_g))
         return (f"thresholds scheduled on the estimated turbulence: std of {self.signal} increments over "
                 f"{self.tau_s:g} s, anchors {a}")
 
@@ -178,39 +180,32 @@ def scheduled_threshold(sigma, log_s, log_c, c, out):  # pragma: no cover - comp
 
 
 def turbulence_series(z: NDArray[np.float64], ok: NDArray[np.bool_], rate_hz: float, tau_s: float = TAU_S,
-                      clip: float = CLIP_G) -> NDArray[np.float64]:
+                      clip_g: float = CLIP_G) -> NDArray[np.float64]:
     """The estimate over a whole series of bank samples (what the bank computes block by block)."""
     out = np.empty(len(z))
     state = np.zeros(4)
     turbulence_estimate(np.ascontiguousarray(z, dtype=np.float64), np.ascontiguousarray(ok, dtype=np.bool_), state,
-                        1.0 / (tau_s * rate_hz), clip * clip, out)
+                        1.0 / (tau_s * rate_hz), clip_g * clip_g, out)
     return out
 
 
-def anchors(series: Sequence[NDArray[np.float64]], arm_samples: int) -> float:
-    """A level's anchor: :data:`ANCHOR_QUANTILE` of the estimate over the armed samples of its flights."""
-    x = np.concatenate([np.asarray(s[arm_samples:], dtype=float) for s in series])
-    x = x[np.isfinite(x)]
-    if x.size == 0:
-        raise DesignError("no finite turbulence estimate on the training flights (no usable nz_g)")
-    return float(np.quantile(x, ANCHOR_QUANTILE))
-
-
-def power_schedule(thresholds: Mapping[str, float], sigma_ref: float, exponents: Mapping[str, float] = EXPONENTS,
-                   *, tau_s: float = TAU_S, clip: float = CLIP_G, signal: str = SIGNAL) -> ThresholdSchedule | None:
-    """Thresholds that hold below the reference and rise as ``(sigma / sigma_ref)^gamma`` above it
-    (two anchors, ``sigma_ref`` and :data:`POWER_SPAN` times it: the log-log interpolation between
-    them is that power law), for the members with an exponent; None when no member has one."""
+def power_schedule(thresholds: Mapping[str, float], sigma_ref_g: float, exponents: Mapping[str, float] = EXPONENTS,
+                   *, tau_s: float = TAU_S, clip_g: float = CLIP_G, signal: str = SIGNAL) -> ThresholdSchedule | None:
+    """Thresholds that hold below the reference ``sigma_ref_g`` [g] and rise as
+    ``(sigma / sigma_ref)^gamma`` above it (two anchors, ``sigma_ref_g`` and :data:`POWER_SPAN` times
+    it: the log-log interpolation between them is that power law), for the members with an
+    exponent; None when no member has one."""
     rows = {mid: (float(c), float(c) * POWER_SPAN ** float(exponents[mid]))
             for mid, c in thresholds.items() if float(exponents.get(mid, 0.0)) > 0 and np.isfinite(c)}
     if not rows:
         return None
-    return ThresholdSchedule(signal, tau_s, clip, ("reference", f"{POWER_SPAN:g} x reference"),
-                             (float(sigma_ref), float(sigma_ref) * POWER_SPAN), rows)
+    return ThresholdSchedule(signal, tau_s, clip_g, ("reference", f"{POWER_SPAN:g} x reference"),
+                             (float(sigma_ref_g), float(sigma_ref_g) * POWER_SPAN), rows)
 
 
 def reference_sigma(series: Sequence[NDArray[np.float64]], arm_samples: int) -> float:
-    """:data:`REFERENCE_QUANTILE` of the estimate over the armed samples of flights at the design conditions."""
+    """:data:`REFERENCE_QUANTILE` of the estimate [g] over the armed samples of flights at the design
+    conditions."""
     x = np.concatenate([np.asarray(s[arm_samples:], dtype=float) for s in series])
     x = x[np.isfinite(x)]
     if x.size == 0:

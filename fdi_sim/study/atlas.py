@@ -75,11 +75,10 @@ def node_flight(aircraft: str, h_ft: float, vc_kts: float, turbulence: str = "mo
     return from_dict(data, source=f"{ref} at the atlas node h {h_ft:g} ft, vc {vc_kts:g} kt, {turbulence} turbulence")
 
 
-def node_task(aircraft: str, h_ft: float, vc_kts: float, turbulence: str, maneuvers: str, cache: str,
-              schedule: bool = False) -> dict[str, Any]:
-    """One node and turbulence level (in a worker): its calibrated design, bank and recorded
-    entries, or why it has none; with ``schedule``, also the members' thresholds at every level
-    (:func:`level_schedule`, a development option: not in the shipped atlas)."""
+def node_task(aircraft: str, h_ft: float, vc_kts: float, turbulence: str, maneuvers: str,
+              cache: str) -> dict[str, Any]:
+    """One node, turbulence level and maneuver variant (in a worker): its calibrated design, bank
+    and recorded entries, or why it has none."""
     os.environ["FDI_SIM_CACHE"] = cache
     os.environ["FDI_SIM_ATLAS"] = "off"  # never the file being remade
     from fdi_sim.errors import DesignError
@@ -100,7 +99,6 @@ def node_task(aircraft: str, h_ft: float, vc_kts: float, turbulence: str, maneuv
             "maneuvers": "doublets" if des.maneuvers else "steady",
             "design_digest": scenario_digest(json.loads(des.to_json()))}
     atlas.RECORDER = []
-    notes: list[str] = []
     try:
         sensors = build_sensors(des, des.dt_s)
         logs = LazyTraining(des, False)
@@ -108,80 +106,22 @@ def node_task(aircraft: str, h_ft: float, vc_kts: float, turbulence: str, maneuv
                           sensor_rates_hz={s.name: s.rate_hz for s in sensors.specs}, pilot_sensors=sensors.names,
                           progress=False, training_logs=logs)
         thresholds = {m.id: float(m.threshold) for m in bank.members}
-        sched, sigma = None, {}
-        if schedule:
-            sched, notes = level_schedule(des, bank, logs)
-            sigma = dict(zip(sched.levels, sched.sigma)) if sched is not None else {}
-        else:
-            # the trained thresholds too where a study's file gave the bank its own (its design node):
-            # on another CPU that file is matched by them (fdi_sim.training.thresholds.apply_study_thresholds)
-            f = des.model.fdi
-            calibrate_thresholds(des, bank, per_sample_target(f.far_per_h, len(bank.members), f.rate_hz),
-                                 progress=False, training_logs=logs)
+        # the trained thresholds too where a study's file gave the bank its own (its design node):
+        # on another CPU that file is matched by them (fdi_sim.training.thresholds.apply_study_thresholds)
+        f = des.model.fdi
+        calibrate_thresholds(des, bank, per_sample_target(f.far_per_h, len(bank.members), f.rate_hz),
+                             progress=False, training_logs=logs)
         rec = list(atlas.RECORDER)
-        for e in rec:
-            if e["kind"] == "bank" and sched is not None:
-                e["entry"] = {**e["entry"], "schedule": sched.to_dict()}
         status = "ok"
     except DesignError as exc:
-        rec, status, thresholds, sigma = [], f"failed: {exc}", {}, {}
+        rec, status, thresholds = [], f"failed: {exc}", {}
     finally:
         atlas.RECORDER = None
-    return {**node, "status": status, "entries": rec, "thresholds": thresholds, "sigma": sigma, "notes": notes,
-            "wall_s": time.perf_counter() - t0}
-
-
-def level_schedule(des: Any, bank: Any, logs: Any) -> tuple[Any, list[str]]:
-    """The members' thresholds at each turbulence level and the levels' anchors, on training flights
-    of the calibrated design flown in that level (the moderate ones are the design's own): the
-    :class:`~fdi_sim.bank.turbulence.ThresholdSchedule` of the node, and notes (a level whose flights
-    cannot be flown or calibrated is left out, and said)."""
-    from fdi_sim.bank.members import per_sample_target
-    from fdi_sim.bank.turbulence import CLIP_G, LEVELS, SIGNAL, TAU_S, ThresholdSchedule, anchors, turbulence_series
-    from fdi_sim.errors import DesignError
-    from fdi_sim.scenario.loader import from_dict
-    from fdi_sim.training import atlas
-    from fdi_sim.training.flights import fly_training, training_seeds
-    from fdi_sim.training.thresholds import calibrate_thresholds, sample_signal
-
-    f = des.model.fdi
-    p = per_sample_target(f.far_per_h, len(bank.members), f.rate_hz)
-    saved, atlas.RECORDER = atlas.RECORDER, None  # the levels' own entries are not the atlas's
-    levels, sig, thr, notes = [], [], {m.id: [] for m in bank.members}, []
-    try:
-        for level in LEVELS:
-            data = json.loads(des.to_json())
-            data["atmosphere"] = {**data.get("atmosphere", {}), "turbulence": level}
-            lsc = from_dict(data, source=f"{des.source} ({level} turbulence)")
-            own = level == des.model.atmosphere.turbulence
-            try:
-                if own:  # the design's own flights and entry (recorded for the atlas)
-                    lg = list(logs)
-                    atlas.RECORDER = saved
-                    rec = calibrate_thresholds(des, bank, p, training_logs=lg, progress=False)
-                else:
-                    lg = fly_training(lsc, training_seeds(f.calibration_flights), f.calibration_duration_s,
-                                      progress=False)
-                    rec = calibrate_thresholds(lsc, bank, p, training_logs=lg, progress=False)
-            except DesignError as exc:
-                atlas.RECORDER = None
-                notes.append(f"{level}: left out ({exc})")
-                continue
-            atlas.RECORDER = None
-            series = [turbulence_series(*sample_signal(bank, g, SIGNAL), bank.rate_hz) for g in lg]
-            levels.append(level)
-            sig.append(anchors(series, bank.arm_samples))
-            for m, r in zip(bank.members, rec["members"]):
-                thr[m.id].append(float(r["threshold"]))
-    finally:
-        atlas.RECORDER = saved
-    if len(levels) < 2:
-        return None, notes + ["fewer than two levels: no schedule"]
-    return ThresholdSchedule(SIGNAL, TAU_S, CLIP_G, tuple(levels), tuple(sig), {k: tuple(v) for k, v in thr.items()}), notes
+    return {**node, "status": status, "entries": rec, "thresholds": thresholds, "wall_s": time.perf_counter() - t0}
 
 
 def make_atlas(aircraft: str, out: Path, *, workers: int = 2, progress: bool = True,
-               nodes: Sequence[tuple[float, float]] | None = None, schedule: bool = False,
+               nodes: Sequence[tuple[float, float]] | None = None,
                doublet_levels: Sequence[str] | None = None) -> dict[str, Any]:
     """Fly every node's training flights (cached) and write the atlas file ``out``.
 
@@ -206,7 +146,7 @@ def make_atlas(aircraft: str, out: Path, *, workers: int = 2, progress: bool = T
 
         combos = [(lv, mv) for mv in MANEUVERS for lv in LEVELS
                   if mv != "doublets" or doublet_levels is None or lv in doublet_levels]
-        futs = [client.submit(node_task, aircraft, h, v, lv, mv, cache, schedule, pure=False)
+        futs = [client.submit(node_task, aircraft, h, v, lv, mv, cache, pure=False)
                 for lv, mv in combos for h, v in nodes]
         for i, fut in enumerate(as_completed(futs, loop=client.loop), 1):
             r = fut.result()
@@ -240,7 +180,7 @@ def make_atlas(aircraft: str, out: Path, *, workers: int = 2, progress: bool = T
            "levels": list(LEVELS), "maneuvers": list(MANEUVERS),
            "variants": [list(c) for c in combos],
            "nodes": [{k: r[k] for k in ("h_ft", "vc_kts", "flaps_deg", "turbulence", "maneuvers", "design_digest",
-                                        "status", "thresholds", "sigma", "notes")} for r in results],
+                                        "status", "thresholds")} for r in results],
            "entries": entries}
     tmp = out.with_suffix(".tmp")
     tmp.write_text(json.dumps(doc, indent=None, separators=(",", ":")) + "\n")
@@ -298,7 +238,7 @@ def add_turbulence_reference(aircraft: str, path: Path, *, workers: int = 2, pro
             out[tuple(r["node"])] = r["reference"]
             if progress:
                 print(f"atlas {aircraft} turbulence reference: {i}/{len(futs)} {r['node']}: "
-                      f"{r['reference']['sigma_ref']:.4g} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+                      f"{r['reference']['sigma_ref_g']:.4g} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
     finally:
         client.close()
         if cluster is not None:
@@ -311,7 +251,7 @@ def add_turbulence_reference(aircraft: str, path: Path, *, workers: int = 2, pro
             n += 1
     for node in doc["nodes"]:
         ref = out.get((node["h_ft"], node["vc_kts"], node["flaps_deg"], node["turbulence"], node["maneuvers"]))
-        node["sigma_ref"] = ref["sigma_ref"] if ref else None
+        node["sigma_ref_g"] = ref["sigma_ref_g"] if ref else None
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(doc, indent=None, separators=(",", ":")) + "\n")
     os.replace(tmp, path)
@@ -327,9 +267,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="default: aircraft/<aircraft>/fdi_atlas.json")
     ap.add_argument("--doublet-levels", default=None,
                     help="comma-separated levels at which the reference's maneuvers are also trained (default: all)")
-    ap.add_argument("--turbulence-schedule", action="store_true",
-                    help="development: also train every node at every level and store the thresholds scheduled on "
-                         "the estimated turbulence (fdi_sim.bank.turbulence); not the shipped atlas")
     ap.add_argument("--turbulence-reference-only", action="store_true",
                     help="only add the turbulence estimate's reference to an existing atlas's entries")
     a = ap.parse_args(argv)
@@ -339,7 +276,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{out}: turbulence reference in {n} thresholds entries")
         return 0
     levels = None if a.doublet_levels is None else [x.strip() for x in a.doublet_levels.split(",") if x.strip()]
-    doc = make_atlas(a.aircraft, out, workers=a.workers, schedule=a.turbulence_schedule, doublet_levels=levels)
+    doc = make_atlas(a.aircraft, out, workers=a.workers, doublet_levels=levels)
     add_turbulence_reference(a.aircraft, out, workers=a.workers)
     ok = sum(n["status"] == "ok" for n in doc["nodes"])
     print(f"{out}: {ok} of {len(doc['nodes'])} nodes calibrated, {len(doc['entries'])} entries")

@@ -25,7 +25,7 @@ from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import design_hash
 from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
 from fdi_sim.bank.turbulence import (
-    CLIP_G, REFERENCE_QUANTILE, SIGNAL, TAU_S, ThresholdSchedule, power_schedule, reference_sigma, turbulence_series,
+    CLIP_G, REFERENCE_QUANTILE, SIGNAL, TAU_S, power_schedule, reference_sigma, turbulence_series,
 )
 from fdi_sim.training.schedule import design_scenario
 from fdi_sim.units import S_PER_H
@@ -256,8 +256,6 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
         try:
             if rec is not None and [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
                 rec = None
-            if rec is not None and "atlas" in rec:
-                rec = None  # an atlas entry copied by an earlier version: the atlas itself is read instead
         except (KeyError, TypeError):
             rec = None  # a damaged entry is recomputed
         akey, afp = _thresholds_atlas_key(sc, bank, p)
@@ -317,8 +315,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
     atlas_record("bank", akey, afp, {k: v for k, v in rec.items() if k != "atlas"})
     for mem, r in zip(bank.members, rec["members"]):
         mem.set_threshold(float(r["threshold"]))
-    schedule = rec.get("schedule")
-    bank.set_schedule(ThresholdSchedule.from_dict(schedule) if schedule else None)
+    bank.set_schedule(None)  # apply_turbulence_schedule sets the one these thresholds have
     bank.calibration = rec
     bank.keep_trace(False)  # the replays kept every block; a flight must not
     bank.reset()
@@ -369,8 +366,8 @@ def turbulence_reference(bank: Any, logs: Sequence[Any], flights: str) -> dict[s
     """The turbulence estimate's reference on flights at the design conditions
     (:func:`fdi_sim.bank.turbulence.reference_sigma`), as a thresholds record keeps it."""
     series = [turbulence_series(*sample_signal(bank, lg, SIGNAL), bank.rate_hz) for lg in logs]
-    return {"signal": SIGNAL, "tau_s": TAU_S, "clip": CLIP_G, "quantile": REFERENCE_QUANTILE,
-            "sigma_ref": reference_sigma(series, bank.arm_samples), "flights": flights}
+    return {"signal": SIGNAL, "tau_s": TAU_S, "clip_g": CLIP_G, "quantile": REFERENCE_QUANTILE,
+            "sigma_ref_g": reference_sigma(series, bank.arm_samples), "flights": flights}
 
 
 def apply_turbulence_schedule(sc: Scenario, bank: Any, p: float) -> str:
@@ -390,13 +387,13 @@ def apply_turbulence_schedule(sc: Scenario, bank: Any, p: float) -> str:
         ref = hit["entry"].get("turbulence_reference") if hit is not None else None
     if ref is None:
         return ""
-    sch = power_schedule({m.id: m.threshold for m in bank.members}, float(ref["sigma_ref"]))
+    sch = power_schedule({m.id: m.threshold for m in bank.members}, float(ref["sigma_ref_g"]))
     if sch is None:
         return ""
     bank.set_schedule(sch)
-    note = (f"thresholds raised as (sigma / {float(ref['sigma_ref']):.3g})^gamma above the {SIGNAL} increments' "
+    note = (f"thresholds raised as (sigma / {float(ref['sigma_ref_g']):.3g})^gamma above the {SIGNAL} increments' "
             f"reference ({ref.get('flights', '')}; gamma " + ", ".join(
-                f"{k} {float(np.log(v[1] / v[0]) / np.log(sch.sigma[1] / sch.sigma[0])):g}"
+                f"{k} {float(np.log(v[1] / v[0]) / np.log(sch.sigma_g[1] / sch.sigma_g[0])):g}"
                 for k, v in sch.thresholds.items()) + ")")
     bank.calibration = {**cal, "turbulence": {**sch.to_dict(), "reference": ref, "note": note}}
     return note
