@@ -1,6 +1,8 @@
-"""A finished study's false alarms grouped by one sampled parameter: per value, runs, flight hours,
-false-alarm episodes (the runs' records), the rate with its exact 95 % Poisson interval, and the
-members that raised them.
+"""A finished study's false alarms grouped by one sampled parameter: per value, runs, armed
+fault-free hours (:func:`fdi_sim.study.stats.exposure_s`, the one exposure definition), the runs'
+false-alarm episodes, the rate with its dispersion-scaled 95 % interval
+(:func:`fdi_sim.study.stats.overdispersed_rate`: alarms cluster by run) and the members that
+raised them (the records' false alarms: per-member episodes outside the faults).
 
     python tools/study_by_param.py STUDY_OUT_DIR [atmosphere.turbulence]
 
@@ -12,37 +14,36 @@ import sys
 from collections import Counter, defaultdict
 from pathlib import Path
 
-from scipy.stats import chi2
-
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from fdi_sim.study.execute import load_records  # noqa: E402
+from fdi_sim.study.stats import exposure_s, overdispersed_rate  # noqa: E402
+from fdi_sim.units import S_PER_H  # noqa: E402
 
 
-def interval(k: int, h: float) -> tuple[float, float]:
-    """Exact (Garwood) 95 % interval of a Poisson rate [1/h]."""
-    lo = chi2.ppf(0.025, 2 * k) / 2 / h if k else 0.0
-    return lo, chi2.ppf(0.975, 2 * k + 2) / 2 / h
+def _row(label: str, counts: list[int], hours: list[float], by: Counter) -> str:
+    r, ci, phi = overdispersed_rate(counts, hours, 0.95)
+    rate = "-" if r is None else f"{r:.3g} [{ci[0]:.3g}, {ci[1]:.3g}]"
+    return (f"{label:>24} | {len(counts):4d} | {sum(hours):5.1f} | {sum(counts):6d} | {rate} | "
+            f"{'-' if phi is None else f'{phi:.2g}'} | {dict(by)}")
 
 
 def main(argv: list[str]) -> int:
     out = Path(argv[0])
     key = argv[1] if len(argv) > 1 else "atmosphere.turbulence"
-    groups: dict[str, list] = defaultdict(lambda: [0, 0, 0.0, Counter()])
+    groups: dict[str, tuple[list[int], list[float], Counter]] = defaultdict(lambda: ([], [], Counter()))
     for r in load_records(out):
-        g = groups[str(r.get("params", {}).get(key))]
-        g[0] += 1
-        g[1] += len(r.get("false_alarms", []))
-        g[2] += float(r.get("flight_h", 0.0))
-        g[3].update(a["detector"] for a in r.get("false_alarms", []))
-    print(f"{key:>24} | runs | hours | alarms | per h [95 %] | by member")
-    for v, (n, k, h, by) in sorted(groups.items()):
-        lo, hi = interval(k, h)
-        print(f"{v:>24} | {n:4d} | {h:5.1f} | {k:6d} | {k / h:.3g} [{lo:.3g}, {hi:.3g}] | {dict(by)}")
-    n, k, h = (sum(g[i] for g in groups.values()) for i in range(3))
-    lo, hi = interval(k, h)
-    print(f"{'all':>24} | {n:4d} | {h:5.1f} | {k:6d} | {k / h:.3g} [{lo:.3g}, {hi:.3g}] |")
+        counts, hours, by = groups[str(r.get("params", {}).get(key))]
+        counts.append(len(r.get("false_alarms", [])))
+        hours.append(exposure_s(r) / S_PER_H)
+        by.update(a["detector"] for a in r.get("false_alarms", []))
+    print(f"{key:>24} | runs | armed h | alarms | per h [95 %] | dispersion | by member")
+    for v, (counts, hours, by) in sorted(groups.items()):
+        print(_row(v, counts, hours, by))
+    allc = [c for g in groups.values() for c in g[0]]
+    allh = [h for g in groups.values() for h in g[1]]
+    print(_row("all", allc, allh, sum((g[2] for g in groups.values()), Counter())))
     return 0
 
 
