@@ -25,7 +25,8 @@ from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import design_hash
 from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
 from fdi_sim.bank.turbulence import (
-    CLIP_G, REFERENCE_QUANTILE, SIGNAL, TAU_S, power_schedule, reference_sigma, turbulence_series,
+    CLIP_G, NOISE_COVER, NOISE_EXPONENTS, REFERENCE_QUANTILE, SIGNAL, TAU_S, power_schedule, reference_sigma,
+    turbulence_series,
 )
 from fdi_sim.training.schedule import design_scenario
 from fdi_sim.units import S_PER_H
@@ -391,9 +392,12 @@ def apply_turbulence_schedule(sc: Scenario, bank: Any, p: float) -> str:
     if sch is None:
         return ""
     bank.set_schedule(sch)
+    cover = {k: NOISE_COVER ** NOISE_EXPONENTS[k] for k in sch.thresholds if NOISE_EXPONENTS.get(k, 0.0) > 0}
     note = (f"thresholds raised as (sigma / {float(ref['sigma_ref_g']):.3g})^gamma above the {SIGNAL} increments' "
             f"reference ({ref.get('flights', '')}; gamma " + ", ".join(
                 f"{k} {float(np.log(v[1] / v[0]) / np.log(sch.sigma_g[1] / sch.sigma_g[0])):g}"
-                for k, v in sch.thresholds.items()) + ")")
-    bank.calibration = {**cal, "turbulence": {**sch.to_dict(), "reference": ref, "note": note}}
+                for k, v in sch.thresholds.items()) + f"); sensor noise up to {NOISE_COVER:g} x the calibration's "
+            "covered: " + ", ".join(f"{k} x {v:.3g}" for k, v in cover.items()))
+    bank.calibration = {**cal, "turbulence": {**sch.to_dict(), "reference": ref, "noise_cover": NOISE_COVER,
+                                              "noise_factors": cover, "note": note}}
     return note

@@ -98,13 +98,22 @@ def test_a_bank_replaying_a_log_schedules_as_the_generation_computes(tmp_path, m
 
 
 def test_the_power_schedule_holds_below_the_reference_and_rises_as_its_power_above():
-    from fdi_sim.bank.turbulence import POWER_SPAN, power_schedule
+    from fdi_sim.bank.turbulence import EXPONENTS, NOISE_COVER, NOISE_EXPONENTS, POWER_SPAN, power_schedule
 
     sch = power_schedule({"kalman-gust-v1": 400.0, "kinematic-altitude-v1": 4.0, "kinematic-airspeed-v1": 10.0}, 0.5)
-    assert set(sch.thresholds) == {"kalman-gust-v1", "kinematic-airspeed-v1"}  # the altitude check has no exponent
+    assert set(sch.thresholds) == {"kalman-gust-v1", "kinematic-airspeed-v1", "kinematic-altitude-v1"}
     sig = np.array([0.1, 0.5, 0.75, 1.0, 0.5 * POWER_SPAN, 100.0])
     out = np.empty(sig.size)
     scheduled_threshold(sig, *sch.log_tables("kinematic-airspeed-v1"), out)
-    want = 10.0 * np.maximum(1.0, np.minimum(sig, 0.5 * POWER_SPAN) / 0.5) ** 2.4
+    want = 10.0 * np.maximum(1.0, np.minimum(sig, 0.5 * POWER_SPAN) / 0.5) ** EXPONENTS["kinematic-airspeed-v1"]
     assert np.allclose(out, want, rtol=1e-12)
-    assert power_schedule({"kinematic-altitude-v1": 4.0}, 0.5) is None
+    # the altitude check does not move with the turbulence; it covers the sensor noise (white noise: beta 1)
+    assert NOISE_EXPONENTS["kinematic-altitude-v1"] == 1.0 and "kinematic-altitude-v1" not in EXPONENTS
+    scheduled_threshold(sig, *sch.log_tables("kinematic-altitude-v1"), out)
+    assert np.allclose(out, 4.0 * NOISE_COVER, rtol=1e-12)
+    assert sch.thresholds["kalman-gust-v1"][0] == 400.0  # the turbulence-driven members get no noise cover
+    assert power_schedule({"kinematic-altitude-v1": 4.0}, 0.5, noise_cover=1.0).thresholds == {
+        "kinematic-altitude-v1": (4.0, 4.0)}
+    assert power_schedule({"other": 4.0}, 0.5) is None
+    with pytest.raises(DesignError, match="noise cover"):
+        power_schedule({"kinematic-altitude-v1": 4.0}, 0.5, noise_cover=0.9)
