@@ -1,0 +1,154 @@
+"""The reduced step models and the F-16 roll root against FGLinearization, as the generated blocks
+``reduced-models`` and ``fglin-roll-root`` of docs/linear.md.
+
+Real JSBSim, no randomness. ``reduced-models``: as ``tests/linear/test_reduce.py``, each
+aircraft linearized at 5000 ft (F-16 420 KTAS, DHC-6 120 KCAS), the grid file's default doublets
+flown for 10 s, the step model (``discretize(..., method="step")``) balanced-truncated by
+``reduce`` at its default tolerance and to 10 states (scales: the doublet amplitudes and the
+response RMS); the worst per-output normalized RMS error over the doublets (the DHC-6 without its
+throttle run). ``fglin-roll-root``: as ``tests/linear/test_fglin_roll_root.py``, the F-16 trimmed
+at 10 000 ft / 400 KTAS, the eigenvalues of the longitudinal [Vt alpha q theta] and lateral
+[beta p r phi] 4 x 4 blocks of A from JSBSim's FGLinearization, its replica with one and with
+five trim-status passes, and our central differences. Runs in about 10 s.
+
+    python docs/make_linear_tables.py
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from fdi_sim.aircraft import Aircraft, trim  # noqa: E402
+from fdi_sim.aircraft.fglin_replica import X_NAMES, fglin_replica  # noqa: E402
+from fdi_sim.aircraft.linearize_fglin import fglinearization  # noqa: E402
+from fdi_sim.linear.grid import default_grid_path, load_grid  # noqa: E402
+from fdi_sim.linear.linearize import linearize  # noqa: E402
+from fdi_sim.linear.transform import discretize, reduce  # noqa: E402
+from fdi_sim.linear.validate import compare, default_doublets, fly_doublets  # noqa: E402
+from fdi_sim.operating_point import OperatingPoint  # noqa: E402
+from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+
+MD = ROOT / "docs" / "linear.md"
+COMMAND = "python docs/make_linear_tables.py"
+MARKER = "<!-- table: result, unstamped; regenerate: no script (hand-typed) -->"
+COMMON = ("fdi_sim/aircraft", "fdi_sim/linear", "fdi_sim/operating_point.py", "fdi_sim/isa.py",
+          "docs/make_linear_tables.py")
+REDUCED_INPUTS = ("aircraft/f16", "aircraft/DHC6") + COMMON
+FGLIN_INPUTS = ("aircraft/f16",) + COMMON
+REDUCED_POINTS = (("F-16 5000 ft / 420 KTAS", OperatingPoint("f16", 5000.0, vt_kts=420.0), ()),
+                  ("DHC-6 5000 ft / 120 KCAS (without the throttle run)", OperatingPoint("DHC6", 5000.0, vc_kts=120.0),
+                   ("throttle_cmd_norm",)))
+F16_OP = OperatingPoint("f16", 10000.0, vt_kts=400.0)
+SETTLED = 5  # trim-status passes that settle the F-16 FBW (tests/linear/test_fglin_roll_root.py)
+
+
+def reduced_table() -> str:
+    lines = ["| model | states | reduced | worst doublet error, full -> reduced |", "|---|---|---|---|"]
+    ten = []
+    for label, op, without in REDUCED_POINTS:
+        ac = Aircraft(op.aircraft)
+        lp = linearize(ac, op, check_fglin=False)
+        m = lp.model
+        g = load_grid(default_grid_path(op.aircraft), op.aircraft)
+        runs = fly_doublets(ac, lp.trim_state, default_doublets(m, g.validation), m.output_names, 10.0)
+        full = discretize(m, ac.dt_s, method="step")
+        su = np.array([g.validation.amplitudes[n] for n in m.input_names])
+        sy = np.sqrt(np.mean(runs.dy ** 2, axis=(0, 1)))
+        red = reduce(full, input_scale=su, output_scale=sy)
+
+        def err(md) -> np.ndarray:
+            v = compare(md, runs)
+            return v.nrmse_without(without) if without else v.nrmse
+
+        ef, er = err(full), err(red)
+        i = int(np.argmax(ef))
+        worst_r = m.output_names[int(np.argmax(er))]
+        red_txt = f"{er[i]:.2%}" if worst_r == m.output_names[i] else f"{worst_r} {er.max():.2%}"
+        lines.append(f"| {label} | {full.n_states} | {red.n_states} | {m.output_names[i]} {ef[i]:.2%} -> {red_txt} |"
+                     .replace("%", " %"))
+        e10 = err(reduce(full, 10, input_scale=su, output_scale=sy))
+        ten.append(f"{label.split(' ')[0]} {m.output_names[int(np.argmax(e10))]} {e10.max():.0%}".replace("%", " %"))
+    lines += ["", "Reduced to 10 states instead, the worst doublet error: " + ", ".join(ten) + "."]
+    return "\n".join(lines)
+
+
+def _eigs(A: np.ndarray, idx: list[int]) -> np.ndarray:
+    return np.sort_complex(np.linalg.eigvals(A[np.ix_(idx, idx)]))
+
+
+def _modes(A: np.ndarray, lon: list[int], lat: list[int]) -> list[str]:
+    """Short period (two real roots), phugoid (pair), Dutch roll (pair), roll, spiral (the faster
+    and the slower real lateral root)."""
+    lo, la = _eigs(A, lon), _eigs(A, lat)
+    lo_real = sorted((z.real for z in lo if abs(z.imag) < 1e-9), key=abs, reverse=True)
+    lo_pair = [z for z in lo if z.imag > 1e-9]
+    la_real = sorted((z.real for z in la if abs(z.imag) < 1e-9), key=abs, reverse=True)
+    la_pair = [z for z in la if z.imag > 1e-9]
+    if not (len(lo_real) == 2 and len(lo_pair) == 1 and len(la_real) == 2 and len(la_pair) == 1):
+        raise RuntimeError(f"unexpected eigenstructure: {lo}, {la}")
+    ph, dr = lo_pair[0], la_pair[0]
+    return [f"{lo_real[0]:.3f}, {lo_real[1]:.3f}", f"{ph.real:.4f} ± {ph.imag:.4f}j", f"{dr.real:.2f} ± {dr.imag:.3f}j",
+            f"{la_real[0]:.4f}", f"{la_real[1]:.4f}"]
+
+
+def _trimmed() -> Aircraft:
+    ac = Aircraft("f16")
+    trim(ac, F16_OP)
+    return ac
+
+
+def fglin_table() -> str:
+    lat = [X_NAMES.index(s) for s in ("Beta", "P", "R", "Phi")]
+    lon = [X_NAMES.index(s) for s in ("Vt", "Alpha", "Q", "Theta")]
+    jl = fglinearization(_trimmed())
+    one = fglin_replica(_trimmed())
+    settled = fglin_replica(_trimmed(), n_runs=SETTLED)
+    lp = linearize(Aircraft("f16"), F16_OP, check_fglin=False)
+    n = lp.model.state_names
+    ours = _modes(lp.model.A, [n.index(s) for s in ("vt_fps", "alpha_rad", "q_radps", "theta_rad")],
+                  [n.index(s) for s in ("beta_rad", "p_radps", "r_radps", "phi_rad")])
+    a, b = _modes(jl.A, lon, lat), _modes(one.A, lon, lat)
+    same = "= replica, 1 pass" if a == b else f"replica, 1 pass: {', '.join(b)}"
+    rows = [(f"FGLinearization ({same})", a), (f"replica, {SETTLED} passes", _modes(settled.A, lon, lat)), ("ours", ours)]
+    lines = ["| 10 kft / 400 KTAS | short period | phugoid | Dutch roll | roll | spiral |", "|---|---|---|---|---|---|"]
+    lines += [f"| {k} | " + " | ".join(v) + " |" for k, v in rows]
+    return "\n".join(lines)
+
+
+def _placed(text: str, block_id: str, header: str) -> str:
+    """``text`` with an empty block ``block_id`` in place of the hand-typed table (first line
+    ``header``) under the old marker line (first run only)."""
+    if f'"id": "{block_id}"' in text:
+        return text
+    lines = text.split("\n")
+    i = next(k for k in range(len(lines) - 1) if lines[k] == MARKER and lines[k + 1].startswith(header))
+    j = i + 1
+    while j < len(lines) and lines[j].startswith("|"):
+        j += 1
+    return "\n".join(lines[:i] + [f'<!-- generated {{"id": "{block_id}"}} -->', "<!-- end generated -->"] + lines[j:])
+
+
+def main() -> int:
+    text = MD.read_text()
+    for block, inputs, header, render in (("reduced-models", REDUCED_INPUTS, "| model | states |", reduced_table),
+                                          ("fglin-roll-root", FGLIN_INPUTS, "| 10 kft / 400 KTAS |", fglin_table)):
+        stamp = make_stamp(block, COMMAND, inputs)
+        text = replace_block(_placed(text, block, header), stamp, render())
+        print(f"made the {block} block")
+    MD.write_text(text)
+    print(f"wrote {MD}")
+    return 0
+
+
+if __name__ == "__main__":
+    if "--print" in sys.argv:
+        print(reduced_table())
+        print()
+        print(fglin_table())
+        raise SystemExit(0)
+    raise SystemExit(main())
