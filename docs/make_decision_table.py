@@ -6,7 +6,7 @@ The same seeded runs as the tests of ``tests/decision/`` (the seeds 20, 30, 40-4
 rates with the Clopper-Pearson 95 % interval (:func:`fdi_sim.decision.intervals.clopper_pearson`;
 for k of n the outputs n samples apart, whose windows are disjoint), run lengths and sample
 numbers with the CLT 95 % interval of the mean over independent runs from reset (4000 runs for
-the ARLs). Runs in about half a minute.
+the ARLs). Runs in about 10 s.
 
     python docs/make_decision_table.py
 """

@@ -9,7 +9,7 @@ the linear model open loop with the logged commands of the samples (``log_sample
 of the q [rad/s] and nz [g] prediction errors over 4 s < t < 11 s, for the step model, the ZOH
 model as it is, and the ZOH model in the paired form ``(A, B, C A, C B + D)`` (what
 ``paired_model`` makes of it for n >= 2 simulation steps; forced here at 120 Hz too, where
-``paired_model`` leaves the model as it is). Runs in about half a minute.
+``paired_model`` leaves the model as it is). Runs in about 5 s.
 
     python docs/make_detection_table.py
 """

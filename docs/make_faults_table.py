@@ -8,7 +8,7 @@ case flown with and without the doublet. The doublet response is the body rate (
 elevator, r for the rudder) with the doublet minus without it; a row gives its peak over
 3-6 s, or that peak over the healthy aircraft's, and for the hard-over the fastest travel of
 the surface after the onset (``/truth/surfaces``) and the time to its stop. Runs in about
-two minutes.
+10 s.
 
     python docs/make_faults_table.py
 """
