@@ -4,7 +4,8 @@
 Each scenario is flown once (its own seed) with ``fdi_sim.training.fly``; the row gives where the
 bank's design and thresholds came from (the atlas node, a study's file, or training flights), the
 first correct isolation (detector, delay after the onset, hypothesis), the alarms outside the
-fault and how the flight ended.
+fault and how the flight ended. The README's summary excerpt (block ``bank-summary``) is the
+bank's part of the run summary of :data:`README_SCENARIO`, from the same flight.
 
     python docs/make_bank_bars_table.py
 """
@@ -28,6 +29,10 @@ INPUTS = tuple(f"scenarios/{p.name}" for p in SCENARIOS) + (
     "aircraft", "fdi_sim/bank", "fdi_sim/decision", "fdi_sim/detectors", "fdi_sim/training", "fdi_sim/faults",
     "fdi_sim/sensors", "docs/make_bank_bars_table.py")
 MD = ROOT / "docs" / "bank.md"
+README = ROOT / "README.md"
+#: the scenario whose run summary the README quotes
+README_SCENARIO = "f16_pitch_gyro_bias"
+_EXCERPT: dict[str, str] = {}
 
 
 def _source(cal: dict) -> str:
@@ -45,6 +50,8 @@ def row(path: Path) -> str:
         res = fly(load(path), tmp, progress=False)
         s = res.summary
         cal = json.loads(read_log(res.log_path).metadata["fdi"]["calibration"])
+    if path.stem == README_SCENARIO:
+        _EXCERPT["text"] = bank_excerpt(s.format())
     hits = [d for d in s.fdi_detections if d.detected_t_s is not None]
     right = sorted((d for d in hits if d.isolation_correct), key=lambda d: d.delay_s)
     if right:
@@ -56,6 +63,30 @@ def row(path: Path) -> str:
     else:
         first = "not detected"
     return (f"| {path.stem} | {_source(cal)} | {first} | {len(s.fdi_false_alarms)} | {res.status} |")
+
+
+def bank_excerpt(summary: str, keep: int = 2) -> str:
+    """The bank's part of a run summary: its first line, the first ``keep`` detection lines, the
+    reconfigurations and the false alarms (other detection lines elided with ``...``, the bank's
+    indented notes left out)."""
+    lines = summary.splitlines()
+    i0 = next(i for i, ln in enumerate(lines) if ln.startswith("fdi bank"))
+    body = []
+    det = 0
+    for ln in lines[i0 + 1:]:
+        if not ln.startswith("  "):
+            break
+        if ln.startswith("   "):  # the bank's notes (design, schedule points): not quoted
+            continue
+        if ln.strip().startswith(("reconfigured", "false alarms")):
+            body.append(ln)
+        elif det < keep:
+            body.append(ln)
+            det += 1
+        elif det == keep:
+            body.append("  ...")
+            det += 1
+    return "\n".join(["```text", lines[i0], *body, "```"])
 
 
 def render() -> str:
@@ -74,6 +105,9 @@ def main() -> int:
     stamp = make_stamp("bank-bars", "python docs/make_bank_bars_table.py", INPUTS)
     MD.write_text(replace_block(MD.read_text(), stamp, render()))
     print(f"wrote the bank-bars block of {MD}")
+    stamp = make_stamp("bank-summary", "python docs/make_bank_bars_table.py", INPUTS)
+    README.write_text(replace_block(README.read_text(), stamp, _EXCERPT["text"]))
+    print(f"wrote the bank-summary block of {README}")
     return 0
 
 
