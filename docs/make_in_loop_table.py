@@ -14,20 +14,29 @@ decision), the isolation reported (the most frequent hypothesis in the first sec
 ``fdi_sim.decision.outcome``) and whether an alarm episode began before the onset (after arming).
 A cell reads ``1.35 s ok`` (detected, isolated right), ``1.35 s x q_radps`` (isolated wrong),
 ``1.35 s -`` (detected, not isolated), ``missed``; ``early`` marks an alarm before the onset.
-The stamp line names the commit, the package version and the command.
+
+docs/card/in_loop.json carries a "stamp" (:mod:`fdi_sim.stamp`, made before the flights start):
+the command, the code the numbers depend on (:data:`INPUTS`) and its digest, the commit and the
+package version. Each table of docs/in_loop.md is a generated block with that stamp (its id the
+block's), so ``tests/test_generated_docs.py`` tells when the code changed under it; the head line
+and the "Stamp:" line repeat it. ``--update`` keeps the card's old stamp (its digest, so the tables
+stay stale if the code changed since: the rows not re-flown are the old code's) and adds the
+re-flown scenarios and this run's commit to its ``commit``.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from concurrent.futures import ProcessPoolExecutor
-from datetime import datetime, timezone
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
+sys.path.insert(0, str(ROOT))
+
+from fdi_sim.stamp import Stamp, generated_block, make_stamp
+
 OUT = DOCS / "card" / "in_loop.json"
 MD = DOCS / "in_loop.md"
 #: the seed documents' methods (the others are the project's own: kalman-gust and the kinematic checks)
@@ -39,6 +48,16 @@ def fault_scenarios() -> list[str]:
     from fdi_sim.scenario import load
 
     return sorted(p.stem for p in (ROOT / "scenarios").glob("*.toml") if load(p).faults)
+
+
+COMMAND = "python docs/make_in_loop_table.py"
+#: what the numbers depend on: the scenarios flown, the aircraft, the detectors (which are
+#: registered, their designs), the bank and its threshold training, the decision, the faults and
+#: sensors, the linearization the designs start from, and this script
+INPUTS = tuple(f"scenarios/{n}.toml" for n in fault_scenarios()) + (
+    "aircraft", "fdi_sim/registry.py", "fdi_sim/detectors", "fdi_sim/bank", "fdi_sim/decision", "fdi_sim/training",
+    "fdi_sim/faults", "fdi_sim/sensors", "fdi_sim/linear", "docs/make_in_loop_table.py")
+UNSTAMPED = f"<!-- table: result, unstamped; regenerate: {COMMAND} -->"
 
 
 def fly_one(name: str) -> dict:
@@ -104,6 +123,24 @@ def _cell(r: dict) -> str:
     return c + (" (early)" if r["early"] else "")
 
 
+def stamp_text(stamp: dict | str) -> str:
+    """The stamp for the reader: version, commit, date and command (a card from before the stamp
+    objects holds this text itself)."""
+    if isinstance(stamp, str):
+        return stamp
+    return f"fdi-sim {stamp['version']} at commit {stamp['commit']}, {stamp['date']}; command: {stamp['command']}"
+
+
+def _table(data: dict, block_id: str, table: list[str]) -> list[str]:
+    """``table`` as the generated block ``block_id`` with the card's stamp (the marker line and the
+    table when the card's stamp is the old text)."""
+    d = data["stamp"]
+    if not isinstance(d, dict):
+        return [UNSTAMPED] + table
+    st = Stamp(**{**d, "inputs": tuple(d["inputs"]), "id": block_id})
+    return generated_block(st, "\n".join(table)).splitlines()
+
+
 def render(data: dict) -> str:
     ids = data["detectors"]
     lines = [f"<!-- {data['stamp']} -->", "# Every detector in the loop, on every shipped fault scenario", "",
@@ -116,32 +153,33 @@ def render(data: dict) -> str:
              "one seed each, so a delay here is one flight's, with no interval, and no hold-out scenario is in this "
              "table. The design target is the bank's 0.1 alarm episodes per flight hour split over the members "
              "(0.0067 per h each); no false-alarm rate is measured here (a 60-120 s flight cannot show one).", "",
-             f"Stamp: {data['stamp']}", ""]
+             f"Stamp: {stamp_text(data['stamp'])}", ""]
     seed = [i for i in ids if i in SEED_METHODS]
     own = [i for i in ids if i not in SEED_METHODS]
-    for title, cols in (("Seed documents' methods", seed), ("The project's own members", own)):
-        lines += [f"## {title}", "", "| scenario (fault) | " + " | ".join(cols) + " |",
-                  "|---|" + "---|" * len(cols)]
+    for title, block_id, cols in (("Seed documents' methods", "in-loop-seed-methods", seed),
+                                  ("The project's own members", "in-loop-own-members", own)):
+        table = ["| scenario (fault) | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
         for sc in data["scenarios"]:
             by = {}
             for r in sc["rows"]:
                 by.setdefault((r["fault"], r["target"]), {})[r["detector"]] = r
             for (fault, target), per in by.items():
                 cells = [_cell(per[c]) if c in per else "" for c in cols]
-                lines.append(f"| {sc['scenario']} ({fault} on {target}, {sc['status']}) | " + " | ".join(cells) + " |")
-        lines.append("")
+                table.append(f"| {sc['scenario']} ({fault} on {target}, {sc['status']}) | " + " | ".join(cells) + " |")
+        lines += [f"## {title}", ""] + _table(data, block_id, table) + [""]
     lines += ["## Why a method misses: its threshold against its statistic", "",
               "Per scenario and seed method, the threshold (set for the member's share of 0.1 alarm episodes "
               "per flight hour on the fault-free training flights), the statistic's peak between arming and the "
-              "onset, and its peak in the 10 s after the onset (the statistic's own scale).", "",
-              "| scenario | " + " | ".join(seed) + " |", "|---|" + "---|" * len(seed)]
+              "onset, and its peak in the 10 s after the onset (the statistic's own scale).", ""]
+    table = ["| scenario | " + " | ".join(seed) + " |", "|---|" + "---|" * len(seed)]
     for sc in data["scenarios"]:
         per = {r["detector"]: r for r in sc["rows"]}
         def g(v):
             return "-" if v is None else f"{v:.3g}"
         cells = [f"{g(per[c].get('threshold'))} / {g(per[c].get('peak_before'))} / {g(per[c].get('peak_after_10s'))}"
                  if c in per else "" for c in seed]
-        lines.append(f"| {sc['scenario']} | " + " | ".join(cells) + " |")
+        table.append(f"| {sc['scenario']} | " + " | ".join(cells) + " |")
+    lines += _table(data, "in-loop-thresholds", table)
     lines += ["", "(threshold / peak before the onset / peak in the 10 s after it)", ""]
     skipped = [(sc["scenario"], n) for sc in data["scenarios"] for n in sc.get("skipped", [])]
     if skipped:
@@ -156,27 +194,7 @@ def render(data: dict) -> str:
         good = sorted({r["detector"] for r in sc["rows"] if r["detector"] in SEED_METHODS and r["correct"]
                        and not r["early"]})
         lines.append(f"- {sc['scenario']}: " + (", ".join(good) if good else "**none**"))
-    marked: list[str] = []
-    for line in lines:  # each table says what it is (tests/test_generated_docs.py): measured, stamp in the head line
-        if line.startswith("|") and not (marked and marked[-1].startswith("|")):
-            marked.append("<!-- table: result, unstamped; regenerate: python docs/make_in_loop_table.py -->")
-        marked.append(line)
-    return "\n".join(marked) + "\n"
-
-
-def stamp() -> str:
-    from fdi_sim import __version__
-
-    try:
-        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "fdi_sim", "scenarios", "aircraft"],
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit, dirty = "unknown", ""
-    when = datetime.now(timezone.utc).strftime("%Y-%m-%d")
-    return (f"fdi-sim {__version__} at commit {commit}{' (with uncommitted changes)' if dirty else ''}, {when}; "
-            "command: python docs/make_in_loop_table.py")
+    return "\n".join(lines) + "\n"
 
 
 def main() -> int:
@@ -190,14 +208,24 @@ def main() -> int:
         from fdi_sim import registry
 
         names = a.only or a.update or fault_scenarios()
+        from dataclasses import asdict
+
+        stamp = asdict(make_stamp("in-loop", COMMAND, INPUTS))  # the code as the flights start
         with ProcessPoolExecutor(a.workers) as ex:
             results = list(ex.map(fly_one, names))
-        data = {"stamp": stamp(), "detectors": registry.ids("detector"), "scenarios": results}
-        if a.update:  # the others as they were; the stamp says this run's code
-            old = {sc["scenario"]: sc for sc in json.loads(OUT.read_text())["scenarios"]}
+        data = {"stamp": stamp, "detectors": registry.ids("detector"), "scenarios": results}
+        if a.update:  # the others as they were, with the old stamp: its digest is the oldest rows' code
+            card = json.loads(OUT.read_text())
+            old = {sc["scenario"]: sc for sc in card["scenarios"]}
             old.update({sc["scenario"]: sc for sc in results})
             data["scenarios"] = [old[k] for k in sorted(old)]
-            data["stamp"] += f" (rows of {', '.join(a.update)} re-flown with --update)"
+            prev = card.get("stamp")
+            if isinstance(prev, dict):
+                data["stamp"] = {**prev, "commit": f"{prev['commit']}; rows of {', '.join(a.update)} re-flown at "
+                                                   f"{stamp['commit']} ({stamp['date']}) with --update"}
+            else:  # no digest to keep: a digest no code has, so the tables read stale until a whole run
+                data["stamp"] = {**stamp, "inputs_sha256": "mixed-runs-regenerate",
+                                 "commit": f"{stamp['commit']}; only {', '.join(a.update)} re-flown (--update)"}
         if a.only:
             print(render(data))
             return 0

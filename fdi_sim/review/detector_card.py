@@ -1,7 +1,10 @@
 """Render the detector card (``docs/detectors.md`` and its figures) from the study's JSON results.
 
 The numbers come from :mod:`fdi_sim.study.card` (run by ``docs/make_detector_card.py``); this
-module only reads them, so the card can be redrawn without flying again.
+module only reads them, so the card can be redrawn without flying again. Each table is a generated
+block (:mod:`fdi_sim.stamp`) carrying the stamp of the JSON card its numbers come from (the stamp
+made when they were computed, its id the block's); a card without a stamp gives its tables the
+"unstamped" marker line instead.
 """
 from __future__ import annotations
 
@@ -13,6 +16,10 @@ from typing import Any
 import numpy as np
 
 from fdi_sim.decision.intervals import clopper_pearson
+from fdi_sim.stamp import Stamp, generated_block
+
+#: what a table of a card without a stamp (written before the stamps) says above it
+UNSTAMPED = "<!-- table: result, unstamped; regenerate: python docs/make_detector_card.py -->"
 
 
 def _fmt(x: float) -> str:
@@ -108,6 +115,16 @@ def fault_figure(data: dict[str, Any], path: Path) -> Path:
     return path
 
 
+def _table(card: dict[str, Any], block_id: str, table: list[str]) -> list[str]:
+    """``table`` as the generated block ``block_id`` with ``card``'s stamp (the marker line and the
+    table when the card has none)."""
+    d = card.get("stamp")
+    if not isinstance(d, dict):
+        return [UNSTAMPED] + table
+    stamp = Stamp(**{**d, "inputs": tuple(d["inputs"]), "id": block_id})
+    return generated_block(stamp, "\n".join(table)).splitlines()
+
+
 def render(results_dir: Path, md_path: Path, figures_dir: Path) -> Path:
     """Write the markdown card from ``conditions.json`` and ``faults.json`` in ``results_dir``."""
     cond = json.loads((results_dir / "conditions.json").read_text()) if (results_dir / "conditions.json").exists() else None
@@ -124,19 +141,16 @@ def render(results_dir: Path, md_path: Path, figures_dir: Path) -> Path:
                   "quantile of the training flights; 'own threshold' is the detector's design (analytic) threshold, or the",
                   "shipped calibration of the kinematic checks. 'meets' = the held-out count is at most the upper end",
                   "of the binomial 95 % interval of the target (fewer false alarms than the target is not a failure).",
-                  ""] + conditions_table(cond) + [""]
+                  ""] + _table(cond, "detector-card-conditions", conditions_table(cond)) + [""]
     if faults:
         fig = fault_figure(faults, figures_dir / "detector_card_faults.png")
         lines += ["## Shipped fault scenarios", "",
                   f"Each detector designed at the scenario's point and calibrated on {faults['n_train']} fault-free "
                   f"flights of it ({faults['duration_s']:g} s, faults removed) at the same target; isolation is the most",
                   "frequent hypothesis in the first second of alarm ('rejected': no hypothesis within the angle bound).",
-                  ""] + best_per_scenario(faults) + ["", "Every detector that alarmed:", ""] + faults_table(faults) + [
+                  ""] + _table(faults, "detector-card-faults-clean", best_per_scenario(faults)) + [
+                  "", "Every detector that alarmed:", ""] + _table(faults, "detector-card-faults-all",
+                                                                     faults_table(faults)) + [
                   "", f"![kalman-gust-v1 statistic against its threshold over the fault interval](figures/{fig.name})", ""]
-    marked: list[str] = []
-    for line in lines:  # each table says what it is (tests/test_generated_docs.py): measured, not yet stamped
-        if line.startswith("|") and not (marked and marked[-1].startswith("|")):
-            marked.append("<!-- table: result, unstamped; regenerate: python docs/make_detector_card.py -->")
-        marked.append(line)
-    md_path.write_text("\n".join(marked) + "\n")
+    md_path.write_text("\n".join(lines) + "\n")
     return md_path
