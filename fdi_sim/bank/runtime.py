@@ -480,7 +480,7 @@ class FdiBank:
             sigma = self._sigma if S == self.S else self._sigma[:S]
             c = self._sched_col
             turbulence_estimate(meas[:S, c], valid[:S, c], self._sched_state,
-                                1.0 / (self.schedule.tau_s * self.rate_hz), self.schedule.clip_g ** 2, sigma)
+                                1.0 / (self.schedule.tau_s * self.rate_hz), self.schedule.clip ** 2, sigma)
             if self.members and self.members[0].keep:
                 self._sigma_trace.append(sigma.copy())
         for m in self.members:

@@ -238,7 +238,7 @@ def add_turbulence_reference(aircraft: str, path: Path, *, workers: int = 2, pro
             out[tuple(r["node"])] = r["reference"]
             if progress:
                 print(f"atlas {aircraft} turbulence reference: {i}/{len(futs)} {r['node']}: "
-                      f"{r['reference']['sigma_ref_g']:.4g} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+                      f"{r['reference']['sigma_ref']:.4g} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
     finally:
         client.close()
         if cluster is not None:
@@ -251,7 +251,7 @@ def add_turbulence_reference(aircraft: str, path: Path, *, workers: int = 2, pro
             n += 1
     for node in doc["nodes"]:
         ref = out.get((node["h_ft"], node["vc_kts"], node["flaps_deg"], node["turbulence"], node["maneuvers"]))
-        node["sigma_ref_g"] = ref["sigma_ref_g"] if ref else None
+        node["sigma_ref"] = ref["sigma_ref"] if ref else None
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(doc, indent=None, separators=(",", ":")) + "\n")
     os.replace(tmp, path)

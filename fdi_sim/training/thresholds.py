@@ -25,7 +25,7 @@ from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import design_hash
 from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
 from fdi_sim.bank.turbulence import (
-    CLIP_G, NOISE_COVER, NOISE_EXPONENTS, REFERENCE_QUANTILE, SIGNAL, TAU_S, power_schedule, reference_sigma,
+    CLIP, NOISE_COVER, NOISE_EXPONENTS, REFERENCE_QUANTILE, SIGNAL, TAU_S, power_schedule, reference_sigma,
     turbulence_series,
 )
 from fdi_sim.training.schedule import design_scenario
@@ -193,7 +193,8 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
         h.update(mem.id.encode())
         h.update(stream_design_key(mem.stream))
     blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "confidence": THRESHOLD_CONFIDENCE, "n": f.calibration_flights, "T": f.calibration_duration_s,
-                       "decision": [f.persistence_k, f.persistence_n], "method": f"episodes-v5-{TAIL_METHOD}", "version": __version__, "members": h.hexdigest()},
+                       "decision": [f.persistence_k, f.persistence_n], "method": f"episodes-v5-{TAIL_METHOD}-ref-{SIGNAL}", "version": __version__,
+                       "members": h.hexdigest()},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
@@ -367,15 +368,15 @@ def turbulence_reference(bank: Any, logs: Sequence[Any], flights: str) -> dict[s
     """The turbulence estimate's reference on flights at the design conditions
     (:func:`fdi_sim.bank.turbulence.reference_sigma`), as a thresholds record keeps it."""
     series = [turbulence_series(*sample_signal(bank, lg, SIGNAL), bank.rate_hz) for lg in logs]
-    return {"signal": SIGNAL, "tau_s": TAU_S, "clip_g": CLIP_G, "quantile": REFERENCE_QUANTILE,
-            "sigma_ref_g": reference_sigma(series, bank.arm_samples), "flights": flights}
+    return {"signal": SIGNAL, "tau_s": TAU_S, "clip": CLIP, "quantile": REFERENCE_QUANTILE,
+            "sigma_ref": reference_sigma(series, bank.arm_samples), "flights": flights}
 
 
 def apply_turbulence_schedule(sc: Scenario, bank: Any, p: float) -> str:
     """Raise the members' thresholds with the estimated turbulence above their calibration's
     (:func:`fdi_sim.bank.turbulence.power_schedule`), from the reference the thresholds record
     keeps, or for a study's file the atlas's record of the same design; a note for the log ("" when
-    none applies: no reference, a schedule already set, or no nz_g)."""
+    none applies: no reference, a schedule already set, or no such measurement)."""
     from fdi_sim.training.atlas import lookup as atlas_lookup
 
     cal = bank.calibration or {}
@@ -388,14 +389,19 @@ def apply_turbulence_schedule(sc: Scenario, bank: Any, p: float) -> str:
         ref = hit["entry"].get("turbulence_reference") if hit is not None else None
     if ref is None:
         return ""
-    sch = power_schedule({m.id: m.threshold for m in bank.members}, float(ref["sigma_ref_g"]))
+    if ref.get("signal") != SIGNAL or "sigma_ref" not in ref:
+        raise DesignError(f"the turbulence reference of this bank's calibration ({cal.get('source', '?')}) is of "
+                          f"{ref.get('signal')!r}, the schedule needs {SIGNAL!r}: made by older code; make "
+                          f"the atlas's references again: python -m fdi_sim.study.atlas {sc.aircraft} "
+                          "--turbulence-reference-only (a trained bank retrains on its own)")
+    sch = power_schedule({m.id: m.threshold for m in bank.members}, float(ref["sigma_ref"]))
     if sch is None:
         return ""
     bank.set_schedule(sch)
     cover = {k: NOISE_COVER ** NOISE_EXPONENTS[k] for k in sch.thresholds if NOISE_EXPONENTS.get(k, 0.0) > 0}
-    note = (f"thresholds raised as (sigma / {float(ref['sigma_ref_g']):.3g})^gamma above the {SIGNAL} increments' "
+    note = (f"thresholds raised as (sigma / {float(ref['sigma_ref']):.3g})^gamma above the {SIGNAL} increments' "
             f"reference ({ref.get('flights', '')}; gamma " + ", ".join(
-                f"{k} {float(np.log(v[1] / v[0]) / np.log(sch.sigma_g[1] / sch.sigma_g[0])):g}"
+                f"{k} {float(np.log(v[1] / v[0]) / np.log(sch.sigma[1] / sch.sigma[0])):g}"
                 for k, v in sch.thresholds.items()) + f"); sensor noise up to {NOISE_COVER:g} x the calibration's "
             "covered: " + ", ".join(f"{k} x {v:.3g}" for k, v in cover.items()))
     bank.calibration = {**cal, "turbulence": {**sch.to_dict(), "reference": ref, "noise_cover": NOISE_COVER,

@@ -17,7 +17,7 @@ def test_the_estimate_converges_and_any_blocking_gives_the_same_bits():
     rate = 20.0
     x = np.cumsum(rng.normal(0.0, 0.3, size=int(600 * rate)))  # increments of std 0.3
     ok = np.ones(x.size, dtype=bool)
-    s = turbulence_series(x, ok, rate, tau_s=30.0, clip_g=10.0)
+    s = turbulence_series(x, ok, rate, tau_s=30.0, clip=10.0)
     assert s[0] == np.inf  # no increment yet: the highest threshold
     assert abs(s[100] / 0.3 - 1) < 0.2  # the running mean's start: usable when the bank arms (5 s)
     late = s[int(60 * rate):]
@@ -41,7 +41,7 @@ def test_a_failed_sample_and_a_step_do_not_move_it_far():
     ok[1000:1010] = False
     x[1000:1010] = np.nan
     x[2000:] += 50.0  # an accelerometer's bias step
-    s = turbulence_series(x, ok, 20.0, tau_s=30.0, clip_g=1.0)
+    s = turbulence_series(x, ok, 20.0, tau_s=30.0, clip=1.0)
     assert np.all(np.isfinite(s[1:]))
     assert s[2000] <= np.sqrt(s[1999] ** 2 + (1.0 - s[1999] ** 2) / 600) + 1e-12  # one clipped increment
 
@@ -79,13 +79,15 @@ def test_a_bank_replaying_a_log_schedules_as_the_generation_computes(tmp_path, m
     res = fly(loads(text, "h.toml"), tmp_path / "runs", progress=False)
     log = read_log(res.log_path)
     bank = bank_for_log(log)
-    sch = ThresholdSchedule("nz_g", 30.0, 3.0, ("none", "light", "moderate"), (0.2, 0.4, 0.5),
+    from fdi_sim.bank.turbulence import CLIP, SIGNAL, TAU_S
+
+    sch = ThresholdSchedule(SIGNAL, TAU_S, CLIP, ("none", "light", "moderate"), (0.005, 0.01, 0.02),
                             {"kinematic-attitude-v1": (3.0, 4.0, 6.0)})
     bank.set_schedule(sch)
     assert bank.members[1].threshold == 3.0  # the stream isolates from the lowest, exactly
     _replay_log(bank, log)
     tr = bank.trace()["kinematic-attitude-v1"]
-    sig = turbulence_series(*sample_signal(bank, log, "nz_g"), bank.rate_hz)
+    sig = turbulence_series(*sample_signal(bank, log, SIGNAL), bank.rate_hz, tau_s=sch.tau_s, clip=sch.clip)
     assert np.array_equal(bank.sigma_trace(), sig)
     want = np.empty(sig.size)
     scheduled_threshold(sig, *sch.log_tables("kinematic-attitude-v1"), want)
