@@ -7,8 +7,9 @@ scale 0.7-1.3, the reference scenario's doublets, 600 s runs; the bank designed 
 schedule-grid node at moderate turbulence whatever the run's level (from the calibration atlas, no
 training flight), raising its thresholds on its own turbulence estimate. The development twins
 (seeds 15101/15102) were looked at while the schedule's exponents and the noise cover were set;
-the hold-out studies (15003/15004; their first seeds 15001/15002 were flown once with the
-accelerometer's schedule and are development now) were flown once after that. Counts are the members' alarm
+the hold-out studies were flown once after that (the F-16's on seed 15003: its first seed, 15001,
+flown with the accelerometer's schedule, is development now; the DHC-6's on 15002, its schedule
+unchanged since). Counts are the members' alarm
 episodes outside any fault (a bank episode raised by two members counts twice), per armed
 fault-free hour (:func:`fdi_sim.study.stats.exposure_s`); intervals are 95 %, scaled by the
 dispersion across runs (:func:`fdi_sim.study.stats.overdispersed_rate`).

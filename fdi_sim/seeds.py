@@ -90,15 +90,16 @@ REGISTRY: tuple[SeedSet, ...] = (
     SeedSet("calibration-validation", "validation", (14011, 14012),
             ("studies/f16_validation", "studies/dhc6_validation"),
             "fresh fault-free studies at the calibration studies' conditions: each checks its thresholds file once"),
-    SeedSet("envelope-hold-out-1", "development", (15001, 15002),
+    SeedSet("envelope-hold-out-1", "development", (15001,),
             ("fdi_sim/bank/turbulence.py",),
-            "the envelope hold-out studies' first seeds, flown once (2026-12-04) with the schedule on the "
-            "vertical accelerometer: F-16 24 alarms in 49.6 h (all in severe air, 3 runs), DHC-6 2 in 49.4 h; "
-            "their severe runs then set the pitch-gyro schedule's exponents, so they are development now"),
-    SeedSet("envelope-hold-out", "hold-out", (15003, 15004),
+            "the F-16 envelope hold-out's first seed, flown once (2026-12-04) with the schedule on the "
+            "vertical accelerometer: 24 alarms in 49.6 h, all in severe air (3 runs); its severe runs then "
+            "set the F-16's pitch-gyro schedule, so it is development now"),
+    SeedSet("envelope-hold-out", "hold-out", (15003, 15002),
             ("studies/f16_envelope_hold_out", "studies/dhc6_envelope_hold_out"),
-            "fault-free studies across each aircraft's envelope, no to severe turbulence (issue 24's bar), "
-            "second seeds: for the pitch-gyro schedule"),
+            "fault-free studies across each aircraft's envelope, no to severe turbulence (issue 24's bar); "
+            "the F-16's second seed (its schedule changed after the first), the DHC-6's first (its schedule "
+            "is the one that hold-out was flown with)"),
     SeedSet("envelope-development", "development", (15101, 15102),
             ("studies/f16_envelope_development", "studies/dhc6_envelope_development"),
             "the envelope hold-out studies' development twins: looked at freely while the bank's turbulence "

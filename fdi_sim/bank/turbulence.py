@@ -7,30 +7,26 @@ turbulence false-alarms in severe (measured on the F-16 at 6000 ft / 360 KCAS, d
 201-203 x 300 s x noise 0.7/1.0/1.3: the flow-angle check's 3-of-5 peak statistic reached 1.58 x its
 threshold, 31 episodes in 0.75 h; the airspeed check 1.35 x, 6) and is deaf in calm air (the
 shipped DHC-6 elevator loss, engine flameout and rudder hard-over, flown in calm air at the moderate
-design, went undetected by every member). The pitch gyro tells the levels apart: the standard
-deviation of its 20 Hz increments over 30 s. It first was the vertical accelerometer's (0.16-0.25 g
-in calm air, 0.54-0.56 moderate, 0.81 severe on the flights above), whose floor of sensor noise
-(scale 0.7-1.3) compresses the ratio between levels and moves with the noise scale: in the F-16
-envelope hold-out study (seed 15001, now development) severe air raised it only 1.54-1.66 x over
-moderate at the same point, and at the nodes' reference its median in severe air was 1.09 (run 98:
-14,800 ft, noise 0.87) while the airspeed and flow-angle checks' statistics were 2.3-2.9 x their
-moderate-air values: 24 false alarms in 10.2 severe-air hours, 18 of them in one run. The pitch
-gyro's increments rose 2.0-2.6 x with those statistics (same runs, same points), nearly free of
-sensor noise; the angle of attack and the airspeed did too, but they are what two members check.
+design, went undetected by every member). The increments of an inertial sensor tell the levels
+apart: the standard deviation of the 20 Hz increments of the pitch gyro (F-16) or the vertical
+accelerometer (DHC-6) over 30 s. Which one is measured per aircraft (:data:`ESTIMATES`): the
+accelerometer's sensor-noise floor hides severe air on the F-16 at altitude, the gyro's response
+hides it on the DHC-6 at low speed.
 
 The method
 ----------
-Estimate (per bank sample ``j``, :func:`turbulence_estimate`)::
+Estimate (per bank sample ``j``, :func:`turbulence_estimate`; ``z`` the aircraft's signal)::
 
-    x_j = q_j - q_{j-1}                          (both usable; clipped: x^2 <= clip^2)
+    x_j = z_j - z_{j-1}                          (both usable; clipped: x^2 <= clip^2)
     v_j = v_{j-1} + a_j (x_j^2 - v_{j-1}),  a_j = max(1 / k_j, 1 / (tau_s rate_hz))
     sigma_j = sqrt(v_j)                          (k_j: increments so far; +inf before the first)
 
 a running mean that becomes an exponential average of time constant ``tau_s`` (so the estimate is
-usable when the bank arms). The clip (:data:`CLIP`, 0.3 rad/s, 5 times the increments' standard
-deviation in severe air) keeps a step of a failed gyro from raising every threshold for ``tau_s``
-(a step of 0.3 rad/s adds 12 % to a moderate-air estimate for 30 s). A maneuver raises the estimate
-too: the reference is taken on flights with the flight's own maneuvers (the atlas's variants).
+usable when the bank arms). The clip (0.3 rad/s for the gyro, 5 times its increments' standard
+deviation in severe air; 3 g for the accelerometer) keeps a step of a failed sensor from raising
+every threshold for ``tau_s`` (a gyro step of 0.3 rad/s adds 12 % to a moderate-air estimate for
+30 s). A maneuver raises the estimate too: the reference is taken on flights with the flight's own
+maneuvers (the atlas's variants).
 
 Schedule (per member, :func:`scheduled_threshold`; the shipped one is :func:`power_schedule`):
 anchors ``sigma_L`` with the member's threshold ``c_L`` at each, interpolated linearly in
@@ -63,24 +59,75 @@ from numpy.typing import NDArray
 
 from fdi_sim.errors import DesignError
 
-#: the signal, its averaging time constant [s] and the increment clip [the signal's unit: rad/s] of
-#: the shipped schedules
-SIGNAL = "q_radps"
+#: the averaging time constant [s] of the shipped schedules
 TAU_S = 30.0
-CLIP = 0.3
 #: the reference of the power schedule (:func:`power_schedule`): this quantile of the estimate over
 #: the armed samples of flights at the design conditions; rougher air raises the thresholds
 REFERENCE_QUANTILE = 0.9
-#: per member, the exponent of the power schedule: threshold x (sigma / sigma_ref)^gamma above the
-#: reference. Measured on the F-16 envelope hold-out study's severe runs 60, 98 and 222 (seed 15001,
-#: now development), each flown again in moderate air at the same point: the q0.99 of the statistic
-#: rose 2.30-2.92 x (airspeed, flow angles) and 6.7-11.1 x (gust filter) for a pitch-gyro estimate
-#: 2.05-2.55 x: gamma 1.07-1.20 and 2.2-2.7; 1.5 and 3 are taken. The attitude check (sensor noise
-#: with a little turbulence: its peak rose 1.29-1.42 x where the accelerometer's estimate rose 1.58 x)
-#: gets 0.5; the altitude check does not move (0). With the accelerometer's estimate they were 3.5
-#: (airspeed, flow angles), 5 (gust filter), 1 (attitude).
-EXPONENTS: Mapping[str, float] = {"kalman-gust-v1": 3.0, "kinematic-airspeed-v1": 1.5, "kinematic-flow-angles-v1": 1.5,
-                                  "kinematic-attitude-v1": 0.5}
+
+
+@dataclass(frozen=True)
+class EstimateSpec:
+    """Which measurement an aircraft's bank estimates the turbulence from, and how its members'
+    thresholds follow it (:func:`power_schedule`).
+
+    Attributes
+    ----------
+    signal : str
+        The measurement whose 20 Hz increments are averaged.
+    clip : float
+        Largest increment counted [the signal's unit].
+    exponents : mapping
+        Member id -> ``gamma``: threshold x (sigma / sigma_ref)^gamma above the reference [-].
+    why : str
+        What measured the choice.
+    """
+
+    signal: str
+    clip: float
+    exponents: Mapping[str, float]
+    why: str
+
+
+#: Per aircraft, each measured on its own development runs (severe runs flown again in moderate air
+#: at the same point: the q0.99 of each member's statistic against the estimate's median).
+#:
+#: F-16: the pitch gyro. The vertical accelerometer's sensor-noise floor compressed its estimate: in
+#: the first F-16 envelope hold-out (seed 15001, now development) severe air raised it 1.54-1.66 x over
+#: moderate at the same point, 1.09 x the node's reference in run 98 (14,800 ft, noise 0.87), while the
+#: airspeed and flow-angle statistics rose 2.3-2.9 x: 24 false alarms in 10.2 severe-air hours. The
+#: pitch gyro's increments rose 2.0-2.6 x with them (runs 60, 98, 222), the gust filter's statistic
+#: 6.7-11.1 x: gamma 1.07-1.20 (air data) and 2.2-2.7 (gust filter); 1.5 and 3 are taken, 0.5 for the
+#: attitude check (its peak rose 1.29-1.42 x where the accelerometer's estimate rose 1.58 x). The
+#: F-16 envelope development study (seed 15101) then gave 0 alarms in 29.8 h (severe 4.1 h).
+#:
+#: DHC-6: the vertical accelerometer. The pitch gyro underestimates severe air at low speed: in its
+#: envelope development study (seed 15102) the gyro schedule gave 364 episodes in 5.8 severe-air hours
+#: (gust filter 327; runs at 101-105 KCAS), its increments rising 1.73-2.05 x where the gust filter's
+#: statistic rose 5.4-11.4 x (runs 10, 18, 48, 117); the accelerometer's rose 2.22-2.57 x. Its
+#: exponents were measured on development seeds 201-203 (300 s, noise 0.7/1.0/1.3) at DHC-6 4000 ft
+#: / 112 kt and the F-16's points (the 3-of-5 peak of statistic/threshold from moderate to severe
+#: against the estimate's ratio: airspeed, flow angles 0.9-2.1, gust filter 3.6-6.4; the larger
+#: taken, the air-data checks then raised to 3.5 by the F-16 development study at 2.4: 24 -> 2
+#: episodes in 4.1 severe hours); the attitude check 1.0. With them the DHC-6's first envelope
+#: hold-out (seed 15002) gave 2 alarms in 49.4 h.
+#:
+#: The altitude check does not move with the turbulence (no exponent) on either.
+ESTIMATES: Mapping[str, EstimateSpec] = {
+    "f16": EstimateSpec("q_radps", 0.3, {"kalman-gust-v1": 3.0, "kinematic-airspeed-v1": 1.5,
+                                         "kinematic-flow-angles-v1": 1.5, "kinematic-attitude-v1": 0.5},
+                        "pitch-gyro increments: the accelerometer's noise floor hid severe air at altitude"),
+    "DHC6": EstimateSpec("nz_g", 3.0, {"kalman-gust-v1": 5.0, "kinematic-airspeed-v1": 3.5,
+                                       "kinematic-flow-angles-v1": 3.5, "kinematic-attitude-v1": 1.0},
+                         "vertical-accelerometer increments: the pitch gyro's hid severe air at low speed"),
+}
+
+
+def estimate_spec(aircraft: str) -> EstimateSpec | None:
+    """The aircraft's :class:`EstimateSpec`, or None (no schedule: its thresholds hold as calibrated)."""
+    return ESTIMATES.get(aircraft)
+
+
 #: the sensor-noise scale the thresholds cover, relative to their calibration's (flown at the
 #: design's scale, 1 in the atlas): a bank is not told its sensors' noise either. Per member, the
 #: exponent ``beta`` of the statistic's growth with the scale: the threshold at the reference is
@@ -205,8 +252,8 @@ def scheduled_threshold(sigma, log_s, log_c, c, out):  # pragma: no cover - comp
             out[j] = math.exp(log_c[i] + w * (log_c[i + 1] - log_c[i]))
 
 
-def turbulence_series(z: NDArray[np.float64], ok: NDArray[np.bool_], rate_hz: float, tau_s: float = TAU_S,
-                      clip: float = CLIP) -> NDArray[np.float64]:
+def turbulence_series(z: NDArray[np.float64], ok: NDArray[np.bool_], rate_hz: float, clip: float,
+                      tau_s: float = TAU_S) -> NDArray[np.float64]:
     """The estimate over a whole series of bank samples (what the bank computes block by block)."""
     out = np.empty(len(z))
     state = np.zeros(4)
@@ -215,9 +262,9 @@ def turbulence_series(z: NDArray[np.float64], ok: NDArray[np.bool_], rate_hz: fl
     return out
 
 
-def power_schedule(thresholds: Mapping[str, float], sigma_ref: float, exponents: Mapping[str, float] = EXPONENTS,
-                   *, noise_cover: float = NOISE_COVER, noise_exponents: Mapping[str, float] = NOISE_EXPONENTS,
-                   tau_s: float = TAU_S, clip: float = CLIP, signal: str = SIGNAL) -> ThresholdSchedule | None:
+def power_schedule(thresholds: Mapping[str, float], sigma_ref: float, spec: EstimateSpec, *,
+                   noise_cover: float = NOISE_COVER, noise_exponents: Mapping[str, float] = NOISE_EXPONENTS,
+                   tau_s: float = TAU_S) -> ThresholdSchedule | None:
     """Thresholds that hold below the reference ``sigma_ref`` [the signal's unit] and rise as
     ``(sigma / sigma_ref)^gamma`` above it (two anchors, ``sigma_ref`` and :data:`POWER_SPAN` times
     it: the log-log interpolation between them is that power law), each first raised to cover the
@@ -227,13 +274,13 @@ def power_schedule(thresholds: Mapping[str, float], sigma_ref: float, exponents:
         raise DesignError(f"the noise cover is a scale of at least 1 (thresholds only rise); got {noise_cover}")
     rows = {}
     for mid, c in thresholds.items():
-        gamma, beta = float(exponents.get(mid, 0.0)), float(noise_exponents.get(mid, 0.0))
+        gamma, beta = float(spec.exponents.get(mid, 0.0)), float(noise_exponents.get(mid, 0.0))
         if (gamma > 0 or beta > 0) and np.isfinite(c):
             c0 = float(c) * noise_cover ** beta
             rows[mid] = (c0, c0 * POWER_SPAN ** gamma)
     if not rows:
         return None
-    return ThresholdSchedule(signal, tau_s, clip, ("reference", f"{POWER_SPAN:g} x reference"),
+    return ThresholdSchedule(spec.signal, tau_s, spec.clip, ("reference", f"{POWER_SPAN:g} x reference"),
                              (float(sigma_ref), float(sigma_ref) * POWER_SPAN), rows)
 
 
@@ -243,5 +290,5 @@ def reference_sigma(series: Sequence[NDArray[np.float64]], arm_samples: int) -> 
     x = np.concatenate([np.asarray(s[arm_samples:], dtype=float) for s in series])
     x = x[np.isfinite(x)]
     if x.size == 0:
-        raise DesignError(f"no finite turbulence estimate on the reference flights (no usable {SIGNAL})")
+        raise DesignError("no finite turbulence estimate on the reference flights (no usable measurement)")
     return float(np.quantile(x, REFERENCE_QUANTILE))

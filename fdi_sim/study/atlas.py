@@ -204,6 +204,7 @@ def reference_task(aircraft: str, h_ft: float, vc_kts: float, turbulence: str, m
     from fdi_sim.detectors.samples import decimation
     from fdi_sim.training.flights import fly_training, training_seeds
     from fdi_sim.training.schedule import calibrated_design
+    from fdi_sim.bank.turbulence import estimate_spec
     from fdi_sim.training.thresholds import turbulence_reference
 
     des = calibrated_design(node_flight(aircraft, h_ft, vc_kts, turbulence, maneuvers), ENVELOPES[aircraft]["reference"])
@@ -212,7 +213,7 @@ def reference_task(aircraft: str, h_ft: float, vc_kts: float, turbulence: str, m
     probe = SimpleNamespace(n=decimation(float(des.model.rate_hz), float(f.rate_hz)), rate_hz=float(f.rate_hz),
                             arm_samples=int(round(f.arm_s * f.rate_hz)))
     ref = turbulence_reference(probe, logs, f"{REFERENCE_FLIGHTS} fault-free flights of {REFERENCE_DURATION_S:g} s "
-                                            "at the calibrated design (the first training seeds)")
+                                            "at the calibrated design (the first training seeds)", estimate_spec(aircraft))
     return {"node": [h_ft, vc_kts, float(des.model.initial.flaps_deg), turbulence, maneuvers], "reference": ref}
 
 

@@ -25,8 +25,8 @@ from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import design_hash
 from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
 from fdi_sim.bank.turbulence import (
-    CLIP, NOISE_COVER, NOISE_EXPONENTS, REFERENCE_QUANTILE, SIGNAL, TAU_S, power_schedule, reference_sigma,
-    turbulence_series,
+    NOISE_COVER, NOISE_EXPONENTS, REFERENCE_QUANTILE, TAU_S, EstimateSpec, estimate_spec, power_schedule,
+    reference_sigma, turbulence_series,
 )
 from fdi_sim.training.schedule import design_scenario
 from fdi_sim.units import S_PER_H
@@ -193,10 +193,15 @@ def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
         h.update(mem.id.encode())
         h.update(stream_design_key(mem.stream))
     blob = json.dumps({"scenario": ff, "p": p, "arm_s": f.arm_s, "confidence": THRESHOLD_CONFIDENCE, "n": f.calibration_flights, "T": f.calibration_duration_s,
-                       "decision": [f.persistence_k, f.persistence_n], "method": f"episodes-v5-{TAIL_METHOD}-ref-{SIGNAL}", "version": __version__,
+                       "decision": [f.persistence_k, f.persistence_n], "method": f"episodes-v5-{TAIL_METHOD}-ref-{_signal(sc)}", "version": __version__,
                        "members": h.hexdigest()},
                       sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
+
+
+def _signal(sc: Scenario) -> str | None:
+    spec = estimate_spec(sc.aircraft)
+    return None if spec is None else spec.signal
 
 
 def _thresholds_atlas_key(sc: Scenario, bank: Any, p: float) -> tuple[str, list[list[float]]]:
@@ -311,8 +316,9 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                                                f"to {float(x.max()):.3g}): it diverges on this aircraft here")
                 rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
                                        "max_training": float(x.max()) if x.size else None})
-            if SIGNAL in bank.meas_names:  # where rougher air begins (fdi_sim.bank.turbulence.power_schedule)
-                rec["turbulence_reference"] = turbulence_reference(bank, logs, f"{len(logs)} training flights")
+            spec = estimate_spec(sc.aircraft)
+            if spec is not None and spec.signal in bank.meas_names:  # where rougher air begins (power_schedule)
+                rec["turbulence_reference"] = turbulence_reference(bank, logs, f"{len(logs)} training flights", spec)
             write_entry(path, rec, use_cache)
     atlas_record("bank", akey, afp, {k: v for k, v in rec.items() if k != "atlas"})
     for mem, r in zip(bank.members, rec["members"]):
@@ -364,11 +370,12 @@ def sample_signal(bank: Any, log: Any, name: str) -> tuple[np.ndarray, np.ndarra
     return z, ok
 
 
-def turbulence_reference(bank: Any, logs: Sequence[Any], flights: str) -> dict[str, Any]:
+def turbulence_reference(bank: Any, logs: Sequence[Any], flights: str, spec: EstimateSpec) -> dict[str, Any]:
     """The turbulence estimate's reference on flights at the design conditions
-    (:func:`fdi_sim.bank.turbulence.reference_sigma`), as a thresholds record keeps it."""
-    series = [turbulence_series(*sample_signal(bank, lg, SIGNAL), bank.rate_hz) for lg in logs]
-    return {"signal": SIGNAL, "tau_s": TAU_S, "clip": CLIP, "quantile": REFERENCE_QUANTILE,
+    (:func:`fdi_sim.bank.turbulence.reference_sigma`; the aircraft's ``spec``), as a thresholds record
+    keeps it."""
+    series = [turbulence_series(*sample_signal(bank, lg, spec.signal), bank.rate_hz, spec.clip) for lg in logs]
+    return {"signal": spec.signal, "tau_s": TAU_S, "clip": spec.clip, "quantile": REFERENCE_QUANTILE,
             "sigma_ref": reference_sigma(series, bank.arm_samples), "flights": flights}
 
 
@@ -380,7 +387,8 @@ def apply_turbulence_schedule(sc: Scenario, bank: Any, p: float) -> str:
     from fdi_sim.training.atlas import lookup as atlas_lookup
 
     cal = bank.calibration or {}
-    if bank.schedule is not None or SIGNAL not in bank.meas_names:
+    spec = estimate_spec(sc.aircraft)
+    if bank.schedule is not None or spec is None or spec.signal not in bank.meas_names:
         return ""
     ref = cal.get("turbulence_reference")
     if ref is None and cal.get("source") == "study":
@@ -389,17 +397,17 @@ def apply_turbulence_schedule(sc: Scenario, bank: Any, p: float) -> str:
         ref = hit["entry"].get("turbulence_reference") if hit is not None else None
     if ref is None:
         return ""
-    if ref.get("signal") != SIGNAL or "sigma_ref" not in ref:
+    if ref.get("signal") != spec.signal or "sigma_ref" not in ref:
         raise DesignError(f"the turbulence reference of this bank's calibration ({cal.get('source', '?')}) is of "
-                          f"{ref.get('signal')!r}, the schedule needs {SIGNAL!r}: made by older code; make "
+                          f"{ref.get('signal')!r}, the schedule needs {spec.signal!r}: made by older code; make "
                           f"the atlas's references again: python -m fdi_sim.study.atlas {sc.aircraft} "
                           "--turbulence-reference-only (a trained bank retrains on its own)")
-    sch = power_schedule({m.id: m.threshold for m in bank.members}, float(ref["sigma_ref"]))
+    sch = power_schedule({m.id: m.threshold for m in bank.members}, float(ref["sigma_ref"]), spec)
     if sch is None:
         return ""
     bank.set_schedule(sch)
     cover = {k: NOISE_COVER ** NOISE_EXPONENTS[k] for k in sch.thresholds if NOISE_EXPONENTS.get(k, 0.0) > 0}
-    note = (f"thresholds raised as (sigma / {float(ref['sigma_ref']):.3g})^gamma above the {SIGNAL} increments' "
+    note = (f"thresholds raised as (sigma / {float(ref['sigma_ref']):.3g})^gamma above the {spec.signal} increments' "
             f"reference ({ref.get('flights', '')}; gamma " + ", ".join(
                 f"{k} {float(np.log(v[1] / v[0]) / np.log(sch.sigma[1] / sch.sigma[0])):g}"
                 for k, v in sch.thresholds.items()) + f"); sensor noise up to {NOISE_COVER:g} x the calibration's "

@@ -17,7 +17,7 @@ def test_the_estimate_converges_and_any_blocking_gives_the_same_bits():
     rate = 20.0
     x = np.cumsum(rng.normal(0.0, 0.3, size=int(600 * rate)))  # increments of std 0.3
     ok = np.ones(x.size, dtype=bool)
-    s = turbulence_series(x, ok, rate, tau_s=30.0, clip=10.0)
+    s = turbulence_series(x, ok, rate, 10.0, tau_s=30.0)
     assert s[0] == np.inf  # no increment yet: the highest threshold
     assert abs(s[100] / 0.3 - 1) < 0.2  # the running mean's start: usable when the bank arms (5 s)
     late = s[int(60 * rate):]
@@ -41,7 +41,7 @@ def test_a_failed_sample_and_a_step_do_not_move_it_far():
     ok[1000:1010] = False
     x[1000:1010] = np.nan
     x[2000:] += 50.0  # an accelerometer's bias step
-    s = turbulence_series(x, ok, 20.0, tau_s=30.0, clip=1.0)
+    s = turbulence_series(x, ok, 20.0, 1.0, tau_s=30.0)
     assert np.all(np.isfinite(s[1:]))
     assert s[2000] <= np.sqrt(s[1999] ** 2 + (1.0 - s[1999] ** 2) / 600) + 1e-12  # one clipped increment
 
@@ -79,15 +79,16 @@ def test_a_bank_replaying_a_log_schedules_as_the_generation_computes(tmp_path, m
     res = fly(loads(text, "h.toml"), tmp_path / "runs", progress=False)
     log = read_log(res.log_path)
     bank = bank_for_log(log)
-    from fdi_sim.bank.turbulence import CLIP, SIGNAL, TAU_S
+    from fdi_sim.bank.turbulence import TAU_S, estimate_spec
 
-    sch = ThresholdSchedule(SIGNAL, TAU_S, CLIP, ("none", "light", "moderate"), (0.005, 0.01, 0.02),
+    spec = estimate_spec("f16")  # the F-16's shipped signal (the pitch gyro)
+    sch = ThresholdSchedule(spec.signal, TAU_S, spec.clip, ("none", "light", "moderate"), (0.005, 0.01, 0.02),
                             {"kinematic-attitude-v1": (3.0, 4.0, 6.0)})
     bank.set_schedule(sch)
     assert bank.members[1].threshold == 3.0  # the stream isolates from the lowest, exactly
     _replay_log(bank, log)
     tr = bank.trace()["kinematic-attitude-v1"]
-    sig = turbulence_series(*sample_signal(bank, log, SIGNAL), bank.rate_hz, tau_s=sch.tau_s, clip=sch.clip)
+    sig = turbulence_series(*sample_signal(bank, log, spec.signal), bank.rate_hz, sch.clip, tau_s=sch.tau_s)
     assert np.array_equal(bank.sigma_trace(), sig)
     want = np.empty(sig.size)
     scheduled_threshold(sig, *sch.log_tables("kinematic-attitude-v1"), want)
@@ -100,22 +101,26 @@ def test_a_bank_replaying_a_log_schedules_as_the_generation_computes(tmp_path, m
 
 
 def test_the_power_schedule_holds_below_the_reference_and_rises_as_its_power_above():
-    from fdi_sim.bank.turbulence import EXPONENTS, NOISE_COVER, NOISE_EXPONENTS, POWER_SPAN, power_schedule
+    from fdi_sim.bank.turbulence import ESTIMATES, NOISE_COVER, NOISE_EXPONENTS, POWER_SPAN, power_schedule
 
-    sch = power_schedule({"kalman-gust-v1": 400.0, "kinematic-altitude-v1": 4.0, "kinematic-airspeed-v1": 10.0}, 0.5)
-    assert set(sch.thresholds) == {"kalman-gust-v1", "kinematic-airspeed-v1", "kinematic-altitude-v1"}
-    sig = np.array([0.1, 0.5, 0.75, 1.0, 0.5 * POWER_SPAN, 100.0])
-    out = np.empty(sig.size)
-    scheduled_threshold(sig, *sch.log_tables("kinematic-airspeed-v1"), out)
-    want = 10.0 * np.maximum(1.0, np.minimum(sig, 0.5 * POWER_SPAN) / 0.5) ** EXPONENTS["kinematic-airspeed-v1"]
-    assert np.allclose(out, want, rtol=1e-12)
-    # the altitude check does not move with the turbulence; it covers the sensor noise (white noise: beta 1)
-    assert NOISE_EXPONENTS["kinematic-altitude-v1"] == 1.0 and "kinematic-altitude-v1" not in EXPONENTS
-    scheduled_threshold(sig, *sch.log_tables("kinematic-altitude-v1"), out)
-    assert np.allclose(out, 4.0 * NOISE_COVER, rtol=1e-12)
-    assert sch.thresholds["kalman-gust-v1"][0] == 400.0  # the turbulence-driven members get no noise cover
-    assert power_schedule({"kinematic-altitude-v1": 4.0}, 0.5, noise_cover=1.0).thresholds == {
+    for ac, spec in ESTIMATES.items():
+        sch = power_schedule({"kalman-gust-v1": 400.0, "kinematic-altitude-v1": 4.0, "kinematic-airspeed-v1": 10.0},
+                             0.5, spec)
+        assert sch.signal == spec.signal and sch.clip == spec.clip, ac
+        assert set(sch.thresholds) == {"kalman-gust-v1", "kinematic-airspeed-v1", "kinematic-altitude-v1"}
+        sig = np.array([0.1, 0.5, 0.75, 1.0, 0.5 * POWER_SPAN, 100.0])
+        out = np.empty(sig.size)
+        scheduled_threshold(sig, *sch.log_tables("kinematic-airspeed-v1"), out)
+        want = 10.0 * np.maximum(1.0, np.minimum(sig, 0.5 * POWER_SPAN) / 0.5) ** spec.exponents["kinematic-airspeed-v1"]
+        assert np.allclose(out, want, rtol=1e-12)
+        # the altitude check does not move with the turbulence; it covers the sensor noise (white noise: beta 1)
+        assert NOISE_EXPONENTS["kinematic-altitude-v1"] == 1.0 and "kinematic-altitude-v1" not in spec.exponents
+        scheduled_threshold(sig, *sch.log_tables("kinematic-altitude-v1"), out)
+        assert np.allclose(out, 4.0 * NOISE_COVER, rtol=1e-12)
+        assert sch.thresholds["kalman-gust-v1"][0] == 400.0  # the turbulence-driven members get no noise cover
+    spec = ESTIMATES["f16"]
+    assert power_schedule({"kinematic-altitude-v1": 4.0}, 0.5, spec, noise_cover=1.0).thresholds == {
         "kinematic-altitude-v1": (4.0, 4.0)}
-    assert power_schedule({"other": 4.0}, 0.5) is None
+    assert power_schedule({"other": 4.0}, 0.5, spec) is None
     with pytest.raises(DesignError, match="noise cover"):
-        power_schedule({"kinematic-altitude-v1": 4.0}, 0.5, noise_cover=0.9)
+        power_schedule({"kinematic-altitude-v1": 4.0}, 0.5, spec, noise_cover=0.9)
