@@ -9,6 +9,11 @@ fault scenarios), each with a "stamp" (fdi_sim.stamp) made when its flights star
 arguments but --workers, which changes no number), the code its numbers depend on (INPUTS) and its
 digest. The markdown and figures are made from the JSON (--render, fdi_sim.review.detector_card):
 each table is a generated block carrying the stamp of the card its numbers come from.
+
+Run time (measured 2026-12-04, --workers 1, niced, on the 2-core machine with a study running, load
+4-5): the six conditions 27 min (2.5-5 min each), then about 7 min per fault scenario
+(f16_stuck_elevator 7 min), so about 100 min in all; that run was stopped after the first fault
+scenario (its conditions.json put back as committed; docs/detectors.md not rendered).
 """
 from __future__ import annotations
 

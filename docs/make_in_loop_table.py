@@ -22,6 +22,12 @@ block's), so ``tests/test_generated_docs.py`` tells when the code changed under 
 and the "Stamp:" line repeat it. ``--update`` keeps the card's old stamp (its digest, so the tables
 stay stale if the code changed since: the rows not re-flown are the old code's) and adds the
 re-flown scenarios and this run's commit to its ``commit``.
+
+Run time (measured 2026-12-04, --workers 1, niced, on the 2-core machine with a study running, load
+5-8): the first scenario (dhc6_airspeed_drift: training 24 x 300 s flights and every member's
+threshold, then the flight) was not done after 8 min, so well over an hour for the ten; that run
+was stopped and nothing was written. After SIGTERM the worker went on to the next scenario (the
+simulator ends a flight "interrupted" on SIGTERM): stopping a run took SIGKILL on the worker's pid.
 """
 from __future__ import annotations
 

@@ -133,7 +133,7 @@ def render(results_dir: Path, md_path: Path, figures_dir: Path) -> Path:
              "Made by `python docs/make_detector_card.py` (protocol: `fdi_sim/study/card.py`); every number below is",
              "read from `docs/card/*.json`. Detector rate 20 Hz; per-sample false-alarm target 1e-4.", ""]
     if cond:
-        lines += [f"## Fault-free flights not used for calibration",
+        lines += ["## Fault-free flights not used for calibration",
                   "",
                   f"Training: {cond['n_train']} fault-free flights of {cond['duration_s']:g} s per condition (seeds "
                   "1e6 + i); test flights: 8 of the same length, seeds 101-108 (a development set of the seed registry: ",
