@@ -44,7 +44,6 @@ RATE_HZ = 20.0
 P_FA = 1e-3
 MD = REPO / "docs" / "kinematic.md"
 COMMAND = "python docs/make_kinematic_card.py"
-MARKER = f"<!-- table: result, unstamped; regenerate: {COMMAND} -->"
 INPUTS = tuple(AIRCRAFT.values()) + FAULTS + (
     "aircraft", "fdi_sim/_aircraft", "fdi_sim/aircraft", "fdi_sim/sim", "fdi_sim/pilot", "fdi_sim/sensors",
     "fdi_sim/scenario", "fdi_sim/flightlog", "fdi_sim/faults", "fdi_sim/bank", "fdi_sim/decision",
@@ -188,23 +187,10 @@ def main(quick: bool = False) -> tuple[str, str]:
     return "\n".join(fa), "\n".join(ft)
 
 
-def _placed(text: str, block_id: str) -> str:
-    """``text`` with an empty block ``block_id`` in place of the first table under the old marker
-    line (first run only; afterwards the block is there and ``replace_block`` finds it)."""
-    if f'"id": "{block_id}"' in text:
-        return text
-    lines = text.split("\n")
-    i = lines.index(MARKER)
-    j = i + 1
-    while j < len(lines) and lines[j].startswith("|"):
-        j += 1
-    return "\n".join(lines[:i] + [f'<!-- generated {{"id": "{block_id}"}} -->', "<!-- end generated -->"] + lines[j:])
-
-
 def write(bodies: tuple[str, str]) -> None:
     text = MD.read_text()
     for block_id, body in zip(("kinematic-false-alarms", "kinematic-faults"), bodies):
-        text = replace_block(_placed(text, block_id), make_stamp(block_id, COMMAND, INPUTS), body)
+        text = replace_block(text, make_stamp(block_id, COMMAND, INPUTS), body)
     MD.write_text(text)
     print(f"wrote the kinematic-false-alarms and kinematic-faults blocks of {MD}")
 

@@ -35,7 +35,6 @@ from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 
 MD = ROOT / "docs" / "linear.md"
 COMMAND = "python docs/make_linear_tables.py"
-MARKER = "<!-- table: result, unstamped; regenerate: no script (hand-typed) -->"
 COMMON = ("fdi_sim/aircraft", "fdi_sim/linear", "fdi_sim/operating_point.py", "fdi_sim/isa.py",
           "docs/make_linear_tables.py")
 REDUCED_INPUTS = ("aircraft/f16", "aircraft/DHC6") + COMMON
@@ -120,25 +119,12 @@ def fglin_table() -> str:
     return "\n".join(lines)
 
 
-def _placed(text: str, block_id: str, header: str) -> str:
-    """``text`` with an empty block ``block_id`` in place of the hand-typed table (first line
-    ``header``) under the old marker line (first run only)."""
-    if f'"id": "{block_id}"' in text:
-        return text
-    lines = text.split("\n")
-    i = next(k for k in range(len(lines) - 1) if lines[k] == MARKER and lines[k + 1].startswith(header))
-    j = i + 1
-    while j < len(lines) and lines[j].startswith("|"):
-        j += 1
-    return "\n".join(lines[:i] + [f'<!-- generated {{"id": "{block_id}"}} -->', "<!-- end generated -->"] + lines[j:])
-
-
 def main() -> int:
     text = MD.read_text()
     for block, inputs, header, render in (("reduced-models", REDUCED_INPUTS, "| model | states |", reduced_table),
                                           ("fglin-roll-root", FGLIN_INPUTS, "| 10 kft / 400 KTAS |", fglin_table)):
         stamp = make_stamp(block, COMMAND, inputs)
-        text = replace_block(_placed(text, block, header), stamp, render())
+        text = replace_block(text, stamp, render())
         print(f"made the {block} block")
     MD.write_text(text)
     print(f"wrote {MD}")
