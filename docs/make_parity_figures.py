@@ -1,13 +1,24 @@
 """Figures and tables for docs/parity.md (parity family: Hagenblad F-16 study, robust parity).
 
 Run from the repository root:  .venv/bin/python docs/make_parity_figures.py [f16] [readings] [robust] [dhc6]
-(about a minute for the first three parts; dhc6 flies 216 two-minute JSBSim flights, 7-12 min).
-Writes docs/figures/parity_*.png and prints every number quoted in docs/parity.md.
+(no part named: all four). The first three parts share one random stream (seed 2024, drawn in
+that order), so their three tables are written only when all three run:
+
+    python docs/make_parity_figures.py f16 readings robust   # blocks parity-f16-readings, parity-pca-threshold,
+                                                             # parity-nominal-vs-robust (about a minute)
+    python docs/make_parity_figures.py dhc6                  # blocks parity-dhc6-p17, parity-dhc6-chosen-p,
+                                                             # parity-dhc6-shift (seed 2026; 216 two-minute
+                                                             # JSBSim flights)
+
+Writes docs/figures/parity_*.png, prints every number quoted in docs/parity.md, and writes the
+tables into docs/parity.md as stamped generated blocks (:mod:`fdi_sim.stamp`).
 """
 from __future__ import annotations
 
+import platform
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import matplotlib
@@ -18,11 +29,17 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Ellipse  # noqa: E402
 from scipy.spatial import ConvexHull  # noqa: E402
 
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
 from fdi_sim.seeds import seeds  # noqa: E402
 from fdi_sim.papers.dhc6_icing_flights import FlightPlan, StudyConfig, fly, fly_all, linearize_models  # noqa: E402
 from fdi_sim.papers.dhc6_icing_study import P_CANDIDATES, evaluate  # noqa: E402
 from fdi_sim.papers.hagenblad_f16 import (  # noqa: E402
+    PAPER_ISOLATION_PARITY,
     PAPER_P_EQ28,
+    PAPER_THRESHOLD_PARITY,
+    PAPER_THRESHOLD_PCA,
     PAPER_READING,
     f16_design,
     f16_parity_study,
@@ -35,11 +52,30 @@ from fdi_sim.detectors.parity import AdditiveFaults, select_outputs  # noqa: E40
 from fdi_sim.detectors.parity_mismatch import compare_nominal_vs_robust  # noqa: E402
 from fdi_sim.detectors.robust_parity import example_icing_models, robust_parity  # noqa: E402
 from fdi_sim.detectors.stochastic_parity import incorrect_diagnosis_matrix  # noqa: E402
+from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "figures"
 COLORS = ["k", "tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown"]
 LABELS = ["no fault"] + [f"f{i}" for i in range(1, 7)]
 np.set_printoptions(precision=4, suppress=True, linewidth=120)
+MD = ROOT / "docs" / "parity.md"
+F16_COMMAND = "python docs/make_parity_figures.py f16 readings robust"
+DHC6_COMMAND = "python docs/make_parity_figures.py dhc6"
+#: the marker lines the blocks replace (first run only)
+F16_MARKER = "<!-- table: result, unstamped; regenerate: python docs/make_parity_figures.py -->"
+DHC6_MARKER = "<!-- table: result, unstamped; regenerate: python docs/make_parity_figures.py dhc6 -->"
+F16_INPUTS = ("fdi_sim/papers/hagenblad_f16.py", "fdi_sim/detectors/parity.py", "fdi_sim/detectors/stochastic_parity.py",
+              "fdi_sim/detectors/pca.py", "fdi_sim/detectors/window_detector.py", "fdi_sim/detectors/robust_parity.py",
+              "fdi_sim/detectors/parity_mismatch.py", "fdi_sim/detectors/base.py", "fdi_sim/decision",
+              "fdi_sim/linear/model.py", "fdi_sim/linear/transform.py", "fdi_sim/errors.py", "docs/make_parity_figures.py")
+#: the flights go through ``fdi_sim.training.fly`` (the sim loop with the scenario's bank)
+DHC6_INPUTS = ("fdi_sim/papers/dhc6_icing_flights.py", "fdi_sim/papers/dhc6_icing_study.py", "aircraft",
+               "fdi_sim/_aircraft", "fdi_sim/aircraft", "fdi_sim/sim", "fdi_sim/pilot", "fdi_sim/sensors",
+               "fdi_sim/scenario", "fdi_sim/flightlog", "fdi_sim/faults", "fdi_sim/bank", "fdi_sim/decision",
+               "fdi_sim/detectors", "fdi_sim/training", "fdi_sim/linear", "fdi_sim/operating_point.py", "fdi_sim/isa.py",
+               "fdi_sim/seeds.py", "fdi_sim/errors.py", "fdi_sim/units.py", "docs/make_parity_figures.py")
+PROCESS_LABEL = {"none": "none", "all-states": "B_v = I_5, Q = 1e-4", "speed-disturbance": "B_v = B_d, Q = 1e-4"}
+SIZES_LABEL = {"unit": "unit", "table": "Table 1"}
 
 
 def cloud(ax, pts, color, label):
@@ -141,6 +177,8 @@ def fig_pca(reading, rng):
 
 
 def readings_table(rng):
+    """Print the readings study; return (rows of the readings table, PCA h per training size)."""
+    rows, pca_h = [], {}
     print("\n== eq. 28 under each reading (max |P - paper|) and simulated P(correct), 100 000 windows/case ==")
     for proc in ("none", "all-states", "speed-disturbance"):
         for sizes in ("unit", "table"):
@@ -149,6 +187,7 @@ def readings_table(rng):
             res = f16_parity_study(rd, 100_000, rng)
             print(f"{proc:18s} {sizes:5s} max|dP| = {np.abs(P - PAPER_P_EQ28).max():.4f}  h = {res.threshold.h:.3f}"
                   f"  P(correct) = {np.round(res.p_correct, 3)}")
+            rows.append((proc, sizes, float(np.abs(P - PAPER_P_EQ28).max()), float(res.threshold.h), res.p_correct))
             if (proc, sizes) == PAPER_READING or (proc, sizes) == ("all-states", "unit"):
                 print(P)
     exact = f16_parity_study(f16_reading(*PAPER_READING), 100_000, rng, exact=True)
@@ -157,6 +196,8 @@ def readings_table(rng):
     for n_train in (1000, 3000, 10_000, 100_000):
         r = f16_pca_study(f16_reading(*PAPER_READING), n_train, 100_000, rng)
         print(f"n_train = {n_train:6d}: h = {r.threshold.h:.3f}  P(correct) = {np.round(r.p_correct, 3)}")
+        pca_h[n_train] = float(r.threshold.h)
+    return rows, pca_h
 
 
 NOISE = dict(input_sqrt=np.diag([0.05, 0.1]), disturbance_sqrt=np.array([[2.0]]),
@@ -220,6 +261,7 @@ def robust_figures(rng):
     fig.tight_layout()
     fig.savefig(OUT / "parity_nominal_vs_robust.png", dpi=110)
     plt.close(fig)
+    return rows, r_iced
 
 
 #: the two conditions of the DHC-6 study, chosen on clean flights only (docs/parity.md)
@@ -289,6 +331,7 @@ def dhc6_study(rng):
                       f"  fault {shf.measured:.2f} (tr {shf.cov_trace:.1f})")
     fig_dhc6_series(results)
     fig_dhc6_curves(results, curves, chosen)
+    return results, curves, chosen
 
 
 def fig_dhc6_series(results):
@@ -352,7 +395,127 @@ def fig_dhc6_curves(results, curves, chosen):
     plt.close(fig)
 
 
+def _e(x: float, digits: int = 2) -> str:
+    """``x`` as 2.5e-5 (``digits`` significant digits); 0 as 0."""
+    if x == 0:
+        return "0"
+    m, ex = f"{x:.{digits - 1}e}".split("e")
+    return f"{m}e{int(ex)}"
+
+
+def _probs(p) -> str:
+    return ", ".join(f"{round(float(v), 3):g}" for v in p)
+
+
+def f16_tables(readings, pca_h, robust_rows, r_iced) -> tuple[str, str, str]:
+    """The three F-16 / synthetic tables: readings, PCA threshold vs training size, nominal vs robust."""
+    t1 = ["| process noise | fault sizes | max abs dev. from eq. 28 | h (5 % FA) | P(correct) f1..f6 |",
+          "| --- | --- | --- | --- | --- |"]
+    for proc, sizes, dev, h, pc in readings:
+        d = f"{dev:.2g}" if dev < 0.01 else f"{dev:.3f}"
+        d = f"**{d}**" if (proc, sizes) == PAPER_READING else d
+        t1.append(f"| {PROCESS_LABEL[proc]} | {SIZES_LABEL[sizes]} | {d} | {h:.3f} | {_probs(pc)} |")
+    t1.append(f"| paper | | | {PAPER_THRESHOLD_PARITY:g} | {_probs(PAPER_ISOLATION_PARITY)} |")
+    t1 += ["", "100 000 simulated windows per case (seed 2024, after the figures' draws); the bold deviation is "
+           "the reading used (`PAPER_READING`)."]
+    sizes = list(pca_h)
+    t2 = ["| training windows | " + " | ".join(f"{n:,}".replace(",", " ") for n in sizes) + " | paper |",
+          "| --- | " + " | ".join("---" for _ in sizes) + " | --- |",
+          "| h (5 % FA, 100 000 test windows) | " + " | ".join(f"{pca_h[n]:.2f}" for n in sizes)
+          + f" | {PAPER_THRESHOLD_PCA:g} |"]
+    t3 = ["| relations | FA clean | FA eta 0.05 | FA eta 0.1 (95 % CI) |", "| --- | --- | --- | --- |"]
+    sets = [robust_rows[0].nominal] + [r.robust for r in robust_rows]
+    for rs in sets:
+        name = f"nominal, {rs.n_relations}" if rs.name == "nominal" else f"robust, p = {rs.n_relations}"
+        fa, ci = rs.false_alarm, rs.false_alarm_ci
+        t3.append(f"| {name} | {_e(fa[0])} | {_e(fa[1])} | {_e(fa[2], 3)} [{_e(ci[2, 0], 3)}, {_e(ci[2, 1], 3)}] |")
+    nom = np.array([r.nominal.false_alarm for r in robust_rows])
+    rng_ = lambda j: (_e(nom[0, j], 3) if nom[:, j].min() == nom[:, j].max()  # noqa: E731
+                      else f"{_e(nom[:, j].min(), 3)} - {_e(nom[:, j].max(), 3)}")
+    t3 += ["", "Fault-free false-alarm probability per sample at 0.9 detection of the 0.01 rad elevator bias on "
+           "the clean model, 400 000 samples per case, Clopper-Pearson interval. The nominal row is its "
+           f"comparison with p = {robust_rows[0].robust.n_relations}; each comparison draws its own samples, and "
+           f"over the {len(robust_rows)} the nominal set gives {rng_(0)} clean, {rng_(1)} at eta 0.05, {rng_(2)} at "
+           f"eta 0.1. Threshold for 0.9 detection on the eta 0.1 model instead (p = {r_iced.robust.n_relations}): "
+           f"FA on eta 0.1 nominal {r_iced.nominal.false_alarm[2]:.3g}, robust {_e(r_iced.robust.false_alarm[2])}."]
+    return "\n".join(t1), "\n".join(t2), "\n".join(t3)
+
+
+def dhc6_tables(results, curves, chosen) -> tuple[str, str, str]:
+    """The three DHC-6 tables: p = 17, chosen p on fresh flights, where the alarms come from."""
+    short = {"light turbulence, 2 deg bias": "light", "calm air, 0.25 deg bias": "calm"}
+    dg, key = "fault_eta0", ("fault_eta0", "eta0.1")
+    t1 = ["| condition | relations | h | FA eta 0 | FA eta 0.05 | **FA eta 0.1** [95 % CI] | alarm onsets / h, eta 0.1 |",
+          "| --- | --- | --- | --- | --- | --- | --- |"]
+    t2 = ["| condition | relations | chosen p | FA on the choice flights | **FA fresh** [95 % CI] |",
+          "| --- | --- | --- | --- | --- |"]
+    t3 = ["| condition | relations | eta 0 | eta 0.05 | eta 0.1 | clean, bias on |", "| --- | --- | --- | --- | --- | --- |"]
+
+    def num(x: float) -> str:
+        if not np.isfinite(x):
+            return "-"
+        if x == 0:
+            return "0"
+        return f"{x:.0f}" if abs(x) >= 100 else f"{x:.1f}" if abs(x) >= 10 else f"{x:.2f}"
+
+    for label, res in results.items():
+        c = short[label]
+        for n in DHC6_SETS:
+            r = res.results[n]
+            fa = r.false_alarms
+            f1 = fa[key]
+            t1.append(f"| {c} | {n} | {r.threshold[dg]:.0f} | {fa[(dg, 'eta0')].rate:.3f} | {fa[(dg, 'eta0.05')].rate:.3f} | "
+                      f"{f1.rate:.3f} [{f1.ci[0]:.3f}, {f1.ci[1]:.3f}] | {f1.onsets_per_hour:.0f} "
+                      f"[{f1.onsets_ci[0]:.0f}, {f1.onsets_ci[1]:.0f}] |")
+            p_best, ff = chosen[label][n]
+            if n == "nominal":
+                t2.append(f"| {c} | {n} | ({p_best}) | {f1.rate:.3f} | {ff.rate:.3f} [{ff.ci[0]:.3f}, {ff.ci[1]:.3f}] |")
+            else:
+                val = curves[label][p_best].results[n].false_alarms[key].rate
+                t2.append(f"| {c} | {n} | {p_best} | {val:.3f} | {ff.rate:.3f} [{ff.ci[0]:.3f}, {ff.ci[1]:.3f}] |")
+            if n != "robust-clean":
+                sh = res.shift[n]
+                t3.append(f"| {c} | {n} | " + " | ".join(
+                    f"{num(sh[g].measured)} / {num(sh[g].predicted)} / {sh[g].cov_trace:.1f}"
+                    for g in ("eta0", "eta0.05", "eta0.1", "fault_eta0")) + " |")
+    first = next(iter(results.values()))
+    hours = first.results["nominal"].false_alarms[key].hours
+    n_test = len(DHC6_FRESH_SEEDS)
+    t1 += ["", f"p = {first.results['nominal'].n_relations} for every set; thresholds for 0.9 detection on the clean "
+           f"faulty flights; {hours:.2f} h of fault-free flight per eta; 95 % bootstrap intervals over flights, exact "
+           "Poisson intervals for the onsets; seed 2026."]
+    t2 += ["", f"p chosen as the best of {', '.join(str(p) for p in DHC6_P)} on the eta 0.1 flights of the table "
+           f"above; false alarms on {n_test} fresh eta 0.1 flights (seeds {DHC6_FRESH_SEEDS[0]}-{DHC6_FRESH_SEEDS[-1]})."]
+    t3 += ["", "Per window, whitened on clean flights, p = 17: `|mean z|^2` measured / predicted from the trims "
+           "`|W P' m_q|^2` / `tr Cov z` (predicted: - for the faulty flights)."]
+    return "\n".join(t1), "\n".join(t2), "\n".join(t3)
+
+
+def _placed(text: str, block_id: str, marker: str) -> str:
+    """``text`` with an empty block ``block_id`` in place of the first table under ``marker``
+    (first run only; afterwards the block is there and ``replace_block`` finds it)."""
+    if f'"id": "{block_id}"' in text:
+        return text
+    lines = text.split("\n")
+    i = lines.index(marker)
+    j = i + 1
+    while j < len(lines) and lines[j].startswith("|"):
+        j += 1
+    return "\n".join(lines[:i] + [f'<!-- generated {{"id": "{block_id}"}} -->', "<!-- end generated -->"] + lines[j:])
+
+
+def write_blocks(blocks, marker: str, command: str, inputs: tuple[str, ...]) -> None:
+    """Write [(block id, body)] into docs/parity.md, in document order."""
+    blocks = list(blocks)
+    text = MD.read_text()
+    for block_id, body in blocks:
+        text = replace_block(_placed(text, block_id, marker), make_stamp(block_id, command, inputs), body)
+    MD.write_text(text)
+    print(f"wrote the {', '.join(b for b, _ in blocks)} blocks of {MD}")
+
+
 def main() -> None:
+    t_start = time.perf_counter()
     OUT.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(2024)
     reading = f16_reading(*PAPER_READING)
@@ -361,11 +524,19 @@ def main() -> None:
         fig_f16(reading, rng)
         fig_pca(reading, rng)
     if "readings" in parts:
-        readings_table(rng)
+        readings, pca_h = readings_table(rng)
     if "robust" in parts:
-        robust_figures(rng)
+        robust_rows, r_iced = robust_figures(rng)
+    if {"f16", "readings", "robust"} <= parts:  # one random stream: the tables only from all three
+        write_blocks(zip(("parity-f16-readings", "parity-pca-threshold", "parity-nominal-vs-robust"),
+                         f16_tables(readings, pca_h, robust_rows, r_iced)), F16_MARKER, F16_COMMAND, F16_INPUTS)
+        print(f"f16 readings robust: {time.perf_counter() - t_start:.0f} s")
     if "dhc6" in parts:
-        dhc6_study(np.random.default_rng(2026))
+        t0 = time.perf_counter()
+        tables = dhc6_tables(*dhc6_study(np.random.default_rng(2026)))
+        write_blocks(zip(("parity-dhc6-p17", "parity-dhc6-chosen-p", "parity-dhc6-shift"), tables), DHC6_MARKER,
+                     DHC6_COMMAND, DHC6_INPUTS)
+        print(f"dhc6: {time.perf_counter() - t0:.0f} s on {platform.machine()}")
 
 
 if __name__ == "__main__":
