@@ -458,12 +458,16 @@ def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, spli
     fit_par = 0 if split == "even" else 1
     fit = [r for r in done if int(r["index"]) % 2 == fit_par]
     held = [r for r in done if int(r["index"]) % 2 != fit_par]
+    # the calibration's own thresholds: the runs flew them times the schedule's noise cover
+    # (fdi_sim.bank.turbulence.power_schedule), which the file's users get again when it is applied
+    raw = {str(m["id"]): float(m["threshold"]) for m in (bank.calibration or {}).get("members", [])}
     for mem in bank.members:
-        trained = mem.threshold
+        flown = mem.threshold
+        trained = raw.get(mem.id, flown)
         logged = json.loads(thr0.replace("'", '"')) if isinstance(thr0, str) else dict(thr0 or {})
-        if mem.id in logged and not math.isclose(float(logged[mem.id]), trained, rel_tol=1e-9):
+        if mem.id in logged and not math.isclose(float(logged[mem.id]), flown, rel_tol=1e-9):
             raise StudyError(str(out), f"runs/{done[0]['scenario']}", f"{mem.id}: the runs flew threshold "
-                             f"{logged[mem.id]!r}, the bank rebuilt here has {trained!r} (another cache, version or "
+                             f"{logged[mem.id]!r}, the bank rebuilt here has {flown!r} (another cache, version or "
                              "sensor suite)", "calibrate with the FDI_SIM_CACHE and fdi-sim version that flew the "
                              "study, or fly it again")
         target = far / n_m
