@@ -4,7 +4,7 @@ A generated table sits in a block whose stamp holds the digest of the files its 
 on (:mod:`fdi_sim.stamp`); the check recomputes the digest (cheap: nothing is re-run). Every
 other table says what it is on the line above it: ``<!-- table: reference -->`` (no measured
 number) or ``<!-- table: result, unstamped; regenerate: ... -->`` (a measured table not yet
-generated with a stamp: listed by the strict xfail below until it is).
+generated with a stamp: refused by the test below).
 """
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ import re
 import shutil
 from pathlib import Path
 
-import pytest
 
 from fdi_sim.stamp import (
     inputs_digest,
@@ -57,9 +56,6 @@ def test_every_table_is_generated_or_says_what_it_is():
     assert not bare, f"tables with neither a generated block nor a marker line above them: {bare}"
 
 
-@pytest.mark.xfail(strict=True, reason="issue 24: result tables written before the stamps existed still need "
-                   "their scripts to emit stamped blocks (and several have no script: hand-typed); the list is "
-                   "in the assertion message")
 def test_every_result_table_and_card_is_generated_with_a_stamp():
     unstamped = [f"{p.relative_to(ROOT)}:{n} ({m.split('regenerate: ')[1]})" for p in DOCS
                  for n, m, gen in _tables(p) if m and m.startswith("result")]
