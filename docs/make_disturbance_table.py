@@ -35,8 +35,6 @@ from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 MD = ROOT / "docs" / "disturbance.md"
 BLOCK = "flown-gusts"
 COMMAND = "python docs/make_disturbance_table.py"
-MARKER = ("<!-- table: result, unstamped; regenerate: pytest -s "
-          "tests/detectors/test_disturbance.py::test_flown_gusts_match_the_shaping_filter -->")
 INPUTS = ("aircraft", "fdi_sim/_aircraft", "fdi_sim/aircraft", "fdi_sim/data.py", "fdi_sim/detectors/disturbance.py",
           "fdi_sim/operating_point.py", "fdi_sim/linear/model.py", "fdi_sim/units.py", "fdi_sim/errors.py",
           "docs/make_disturbance_table.py")
@@ -137,24 +135,11 @@ def render() -> str:
     return "\n".join(lines)
 
 
-def _placed(text: str) -> str:
-    """``text`` with an empty block in place of the hand-typed table under the old marker line
-    (first run only; afterwards the block is there and ``replace_block`` finds it)."""
-    if f'"id": "{BLOCK}"' in text:
-        return text
-    lines = text.split("\n")
-    i = lines.index(MARKER)
-    j = i + 1
-    while j < len(lines) and lines[j].startswith("|"):
-        j += 1
-    return "\n".join(lines[:i] + [f'<!-- generated {{"id": "{BLOCK}"}} -->', "<!-- end generated -->"] + lines[j:])
-
-
 def main() -> int:
     t0 = time.perf_counter()
     stamp = make_stamp(BLOCK, COMMAND, INPUTS)
     body = render()
-    MD.write_text(replace_block(_placed(MD.read_text()), stamp, body))
+    MD.write_text(replace_block(MD.read_text(), stamp, body))
     print(body)
     print(f"wrote the {BLOCK} block of {MD} in {time.perf_counter() - t0:.0f} s")
     return 0

@@ -32,8 +32,6 @@ from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 MD = ROOT / "docs" / "linear.md"
 BLOCK = "default-grids"
 COMMAND = "python docs/make_linear_grid_table.py"
-MARKER = ("<!-- table: result, unstamped; regenerate: fdi-sim linearize f16; fdi-sim linearize DHC6; "
-          "fdi-sim linearize DHC6 --grid iced -->")
 INPUTS = ("aircraft", "fdi_sim/_aircraft", "fdi_sim/aircraft", "fdi_sim/linear", "fdi_sim/operating_point.py",
           "fdi_sim/isa.py", "fdi_sim/units.py", "fdi_sim/errors.py", "fdi_sim/data.py", "fdi_sim/threads.py",
           "docs/make_linear_grid_table.py")
@@ -142,24 +140,11 @@ def render() -> str:
     return "\n".join(lines)
 
 
-def _placed(text: str) -> str:
-    """``text`` with an empty block in place of the hand-typed table under the old marker line
-    (first run only; afterwards the block is there and ``replace_block`` finds it)."""
-    if f'"id": "{BLOCK}"' in text:
-        return text
-    lines = text.split("\n")
-    i = lines.index(MARKER)
-    j = i + 1
-    while j < len(lines) and lines[j].startswith("|"):
-        j += 1
-    return "\n".join(lines[:i] + [f'<!-- generated {{"id": "{BLOCK}"}} -->', "<!-- end generated -->"] + lines[j:])
-
-
 def main() -> int:
     t0 = time.perf_counter()
     stamp = make_stamp(BLOCK, COMMAND, INPUTS)
     body = render()
-    MD.write_text(replace_block(_placed(MD.read_text()), stamp, body))
+    MD.write_text(replace_block(MD.read_text(), stamp, body))
     print(body)
     print(f"wrote the {BLOCK} block of {MD} in {time.perf_counter() - t0:.0f} s")
     return 0

@@ -29,7 +29,6 @@ from fdi_sim.papers.twin_otter_interim import twin_otter_longitudinal_interim  #
 from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 
 MD = ROOT / "docs" / "observers.md"
-MARKER = "<!-- table: result, unstamped; regenerate: no script (hand-typed) -->"
 BLOCK = "adapted-entries"
 INPUTS = ("fdi_sim/detectors/adaptive_observer.py", "fdi_sim/detectors/kalman.py", "fdi_sim/detectors/base.py",
           "fdi_sim/detectors/directional_observer.py", "fdi_sim/papers/twin_otter_interim.py", "fdi_sim/linear/model.py",
@@ -85,23 +84,10 @@ def render() -> str:
     return "\n".join(lines)
 
 
-def _placed(text: str, block_id: str) -> str:
-    """``text`` with an empty block ``block_id`` in place of the hand-typed table under the old
-    marker line (first run only; afterwards the block is there and ``replace_block`` finds it)."""
-    if f'"id": "{block_id}"' in text:
-        return text
-    lines = text.split("\n")
-    i = lines.index(MARKER)
-    j = i + 1
-    while j < len(lines) and lines[j].startswith("|"):
-        j += 1
-    return "\n".join(lines[:i] + [f'<!-- generated {{"id": "{block_id}"}} -->', "<!-- end generated -->"] + lines[j:])
-
-
 def main() -> int:
     stamp = make_stamp(BLOCK, "python docs/make_observer_table.py", INPUTS)
     body = render()
-    MD.write_text(replace_block(_placed(MD.read_text(), stamp.id), stamp, body))
+    MD.write_text(replace_block(MD.read_text(), stamp, body))
     print(f"wrote the {BLOCK} block of {MD}")
     return 0
 

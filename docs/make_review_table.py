@@ -32,8 +32,6 @@ MD = ROOT / "docs" / "review.md"
 BLOCK = "review-timing"
 COMMAND = "python docs/make_review_table.py"
 SCENARIO = "scenarios/f16_pitch_gyro_bias.toml"
-MARKER = ("<!-- table: result, unstamped; regenerate: fdi-sim run scenarios/f16_pitch_gyro_bias.toml --duration 600 "
-          "--log /tmp/h1_10min.mcap --force --quiet; fdi-sim review /tmp/h1_10min.mcap --quiet -->")
 INPUTS = (SCENARIO, "aircraft", "fdi_sim/_aircraft", "fdi_sim/review", "fdi_sim/flightlog", "fdi_sim/cli.py",
           "fdi_sim/sim", "fdi_sim/bank", "fdi_sim/detectors", "fdi_sim/decision", "fdi_sim/training",
           "fdi_sim/sensors", "fdi_sim/faults", "fdi_sim/pilot", "fdi_sim/scenario", "fdi_sim/aircraft",
@@ -135,24 +133,11 @@ def render() -> str:
     return "\n".join(lines)
 
 
-def _placed(text: str) -> str:
-    """``text`` with an empty block in place of the hand-typed table under the old marker line
-    (first run only; afterwards the block is there and ``replace_block`` finds it)."""
-    if f'"id": "{BLOCK}"' in text:
-        return text
-    lines = text.split("\n")
-    i = lines.index(MARKER)
-    j = i + 1
-    while j < len(lines) and lines[j].startswith("|"):
-        j += 1
-    return "\n".join(lines[:i] + [f'<!-- generated {{"id": "{BLOCK}"}} -->', "<!-- end generated -->"] + lines[j:])
-
-
 def main() -> int:
     t0 = time.perf_counter()
     stamp = make_stamp(BLOCK, COMMAND, INPUTS)
     body = render()
-    MD.write_text(replace_block(_placed(MD.read_text()), stamp, body))
+    MD.write_text(replace_block(MD.read_text(), stamp, body))
     print(body)
     print(f"wrote the {BLOCK} block of {MD} in {time.perf_counter() - t0:.0f} s")
     return 0
