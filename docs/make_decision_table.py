@@ -34,7 +34,7 @@ from fdi_sim.decision import (  # noqa: E402
 )
 from fdi_sim.decision.glr import GLR_ARL_MEASURED_RATIO  # noqa: E402
 from fdi_sim.decision.intervals import clopper_pearson  # noqa: E402
-from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+from fdi_sim.stamp import table_main  # noqa: E402
 
 MD = ROOT / "docs" / "decision.md"
 INPUTS = ("fdi_sim/decision", "fdi_sim/errors.py", "docs/make_decision_table.py")
@@ -161,16 +161,5 @@ def render() -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
-    stamp = make_stamp("decision-white-noise", "python docs/make_decision_table.py", INPUTS)
-    body = render()
-    MD.write_text(replace_block(MD.read_text(), stamp, body))
-    print(f"wrote the decision-white-noise block of {MD}")
-    return 0
-
-
 if __name__ == "__main__":
-    if "--print" in sys.argv:
-        print(render())
-        raise SystemExit(0)
-    raise SystemExit(main())
+    raise SystemExit(table_main(MD, "python docs/make_decision_table.py", [("decision-white-noise", INPUTS, render)], sys.argv[1:]))

@@ -31,7 +31,7 @@ from fdi_sim.linear.grid import parse_grid_spec  # noqa: E402
 from fdi_sim.linear.linearize import linearize_grid  # noqa: E402
 from fdi_sim.scenario import loads  # noqa: E402
 from fdi_sim.sim.run import run  # noqa: E402
-from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+from fdi_sim.stamp import table_main  # noqa: E402
 
 MD = ROOT / "docs" / "detection.md"
 BLOCK = "sample-pairing"
@@ -91,16 +91,5 @@ def render() -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
-    stamp = make_stamp(BLOCK, "python docs/make_detection_table.py", INPUTS)
-    body = render()
-    MD.write_text(replace_block(MD.read_text(), stamp, body))
-    print(f"wrote the {BLOCK} block of {MD}")
-    return 0
-
-
 if __name__ == "__main__":
-    if "--print" in sys.argv:
-        print(render())
-        raise SystemExit(0)
-    raise SystemExit(main())
+    raise SystemExit(table_main(MD, "python docs/make_detection_table.py", [(BLOCK, INPUTS, render)], sys.argv[1:]))

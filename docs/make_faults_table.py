@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 from fdi_sim.flightlog import read_log  # noqa: E402
 from fdi_sim.scenario import from_dict  # noqa: E402
 from fdi_sim.sim import run  # noqa: E402
-from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+from fdi_sim.stamp import table_main  # noqa: E402
 
 MD = ROOT / "docs" / "faults.md"
 BLOCK = "actuator-faults"
@@ -106,16 +106,5 @@ def render() -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
-    stamp = make_stamp(BLOCK, "python docs/make_faults_table.py", INPUTS)
-    body = render()
-    MD.write_text(replace_block(MD.read_text(), stamp, body))
-    print(f"wrote the {BLOCK} block of {MD}")
-    return 0
-
-
 if __name__ == "__main__":
-    if "--print" in sys.argv:
-        print(render())
-        raise SystemExit(0)
-    raise SystemExit(main())
+    raise SystemExit(table_main(MD, "python docs/make_faults_table.py", [(BLOCK, INPUTS, render)], sys.argv[1:]))

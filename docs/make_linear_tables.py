@@ -31,7 +31,7 @@ from fdi_sim.linear.linearize import linearize  # noqa: E402
 from fdi_sim.linear.transform import discretize, reduce  # noqa: E402
 from fdi_sim.linear.validate import compare, default_doublets, fly_doublets  # noqa: E402
 from fdi_sim.operating_point import OperatingPoint  # noqa: E402
-from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+from fdi_sim.stamp import table_main  # noqa: E402
 
 MD = ROOT / "docs" / "linear.md"
 COMMAND = "python docs/make_linear_tables.py"
@@ -119,22 +119,6 @@ def fglin_table() -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
-    text = MD.read_text()
-    for block, inputs, header, render in (("reduced-models", REDUCED_INPUTS, "| model | states |", reduced_table),
-                                          ("fglin-roll-root", FGLIN_INPUTS, "| 10 kft / 400 KTAS |", fglin_table)):
-        stamp = make_stamp(block, COMMAND, inputs)
-        text = replace_block(text, stamp, render())
-        print(f"made the {block} block")
-    MD.write_text(text)
-    print(f"wrote {MD}")
-    return 0
-
-
 if __name__ == "__main__":
-    if "--print" in sys.argv:
-        print(reduced_table())
-        print()
-        print(fglin_table())
-        raise SystemExit(0)
-    raise SystemExit(main())
+    raise SystemExit(table_main(MD, COMMAND, [("reduced-models", REDUCED_INPUTS, reduced_table),
+                                              ("fglin-roll-root", FGLIN_INPUTS, fglin_table)], sys.argv[1:]))

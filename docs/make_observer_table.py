@@ -26,7 +26,7 @@ sys.path.insert(0, str(ROOT))
 from fdi_sim.detectors.adaptive_observer import AdaptiveObserver, choose_sidar_gains  # noqa: E402
 from fdi_sim.detectors.kalman import simulate_discrete, steady_state_kalman  # noqa: E402
 from fdi_sim.papers.twin_otter_interim import twin_otter_longitudinal_interim  # noqa: E402
-from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+from fdi_sim.stamp import table_main  # noqa: E402
 
 MD = ROOT / "docs" / "observers.md"
 BLOCK = "adapted-entries"
@@ -84,16 +84,5 @@ def render() -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
-    stamp = make_stamp(BLOCK, "python docs/make_observer_table.py", INPUTS)
-    body = render()
-    MD.write_text(replace_block(MD.read_text(), stamp, body))
-    print(f"wrote the {BLOCK} block of {MD}")
-    return 0
-
-
 if __name__ == "__main__":
-    if "--print" in sys.argv:
-        print(render())
-        raise SystemExit(0)
-    raise SystemExit(main())
+    raise SystemExit(table_main(MD, "python docs/make_observer_table.py", [(BLOCK, INPUTS, render)], sys.argv[1:]))

@@ -18,6 +18,7 @@ import hashlib
 import json
 import re
 import subprocess
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -31,6 +32,7 @@ __all__ = [
     "read_blocks",
     "replace_block",
     "stale_blocks",
+    "table_main",
 ]
 
 #: the repository (the parent of the package)
@@ -164,3 +166,19 @@ def stale_blocks(path: Path, root: Path = ROOT) -> list[str]:
             out.append(f"{path.name} [{s.id}]: stale (inputs {', '.join(s.inputs)} changed since commit {s.commit}); "
                        f"run `{s.command}`")
     return out
+
+
+def table_main(md: Path, command: str, blocks: Sequence[tuple[str, Sequence[str], Callable[[], str]]],
+               argv: Sequence[str]) -> int:
+    """The ``main`` of a ``docs/make_*.py`` table script: each ``(block id, inputs, render)`` of
+    ``blocks`` rendered and written into ``md`` with a stamp made now for ``command``; with
+    ``--print`` in ``argv`` the tables are printed instead and nothing is written."""
+    if "--print" in argv:
+        print("\n\n".join(render() for _, _, render in blocks))
+        return 0
+    text = md.read_text()
+    for block_id, inputs, render in blocks:
+        text = replace_block(text, make_stamp(block_id, command, tuple(inputs)), render())
+    md.write_text(text)
+    print(f"wrote the {', '.join(b for b, _, _ in blocks)} block(s) of {md}")
+    return 0

@@ -98,3 +98,18 @@ def test_a_digest_covers_content_and_names(tmp_path):
     (tmp_path / "a.txt").rename(tmp_path / "b.txt")
     (tmp_path / "b.txt").write_text("1")
     assert inputs_digest(("b.txt",), root=tmp_path) != d
+
+
+def test_a_table_script_writes_its_stamped_block_or_prints_it(tmp_path, capsys):
+    """fdi_sim.stamp.table_main, the main of the docs/make_*.py table scripts: --print writes
+    nothing; otherwise the block is written with a stamp the freshness check accepts."""
+    from fdi_sim.stamp import table_main
+
+    doc = tmp_path / "doc.md"
+    doc.write_text("# A doc\n")
+    blocks = [("t", ("fdi_sim/stamp.py",), lambda: "| a |\n|---|\n| 1 |")]
+    assert table_main(doc, "python make.py", blocks, ["--print"]) == 0
+    assert doc.read_text() == "# A doc\n" and "| 1 |" in capsys.readouterr().out
+    assert table_main(doc, "python make.py", blocks, []) == 0
+    (stamp, body), = read_blocks(doc.read_text())
+    assert stamp.id == "t" and "| 1 |" in body and stale_blocks(doc) == []
