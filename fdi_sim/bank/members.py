@@ -19,11 +19,12 @@ from fdi_sim.units import S_PER_H
 
 #: the detectors a new user gets, per aircraft (``docs/detectors.md``: the ones that work on it)
 #: (the flow-angle check watches the vanes, which nothing else isolates; in turbulence its threshold,
-#: set on the scenario's flights, is large and it only catches gross vane faults)
-DEFAULT_BANKS: dict[str, tuple[str, ...]] = {
-    ac: ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1",
-         "kinematic-flow-angles-v1") for ac in ("f16", "DHC6")
-}
+#: set on the scenario's flights, is large and it only catches gross vane faults; the engine-gauge
+#: check needs two engines: the DHC-6 only, where the gust filter alone named the flameout nx_g
+#: as often as the throttle, their signatures collinear at 0.944 and 0.940)
+_COMMON = ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1",
+           "kinematic-flow-angles-v1")
+DEFAULT_BANKS: dict[str, tuple[str, ...]] = {"f16": _COMMON, "DHC6": _COMMON + ("engine-gauges-v1",)}
 
 
 #: keys of a [[detectors]] entry that are not design options

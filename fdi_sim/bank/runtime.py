@@ -588,6 +588,8 @@ class FdiBank:
     def _kind(self, name: str) -> str:
         if name.endswith("_cmd_norm"):
             return "actuator (" + name.removesuffix("_cmd_norm") + ")"
+        if name.startswith("engine_"):
+            return "engine"
         return "sensor"
 
     def _estimator(self, name: str) -> _Member | None:

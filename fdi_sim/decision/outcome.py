@@ -41,14 +41,19 @@ ISOLATION_WINDOW_S = 1.0
 def _matches(isolation: str | None, target: str) -> bool | None:
     """Whether an isolated hypothesis names the fault's target (None: nothing to compare).
 
-    Hypotheses are signal names: a surface's command (``elevator_cmd_norm`` for ``elevator``), an
-    engine's thrust through the throttle (``throttle_cmd_norm`` for ``engine_<i>`` and
-    ``throttle``), a sensor by its name. Icing (``airframe``) has no hypothesis in any bank: None.
+    Hypotheses are signal names: a surface's command (``elevator_cmd_norm`` for ``elevator``), the
+    engines' thrust through the throttle (``throttle_cmd_norm``: right for ``throttle`` and for any
+    ``engine_<i>``, a hypothesis that cannot tell engines apart), one engine by its target name
+    (``engine_0``: the engine-gauge check), a sensor by its name (an engine's gauge,
+    ``torque_0_ftlb``, names a sensor fault, not the engine's). Icing (``airframe``) has no
+    hypothesis in any bank: None.
     """
     if isolation is None or target in ("airframe", ""):
         return None
-    if target.startswith("engine_") or target == "throttle":
-        return isolation == "throttle_cmd_norm" or isolation.startswith(("n1_", "torque_", "prop_"))
+    if target.startswith("engine_"):
+        return isolation in ("throttle_cmd_norm", target)
+    if target == "throttle":
+        return isolation == "throttle_cmd_norm" or isolation.startswith("engine_")
     return isolation == target or isolation.startswith(target + "_")
 
 

@@ -317,11 +317,23 @@ def _kinematic_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
     return KinematicStream(det), f"{m.id}: {det.design.kind} check ({sc.model.atmosphere.turbulence} turbulence)"
 
 
+def _engine_gauge_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
+    """engine-gauges-v1: the aircraft's sensor suite gives its scales; no model, no training."""
+    from fdi_sim.detectors.spec import build_detector, DetectorSpec
+
+    sc = ctx.sc
+    params = {"aircraft": sc.aircraft, "rate_hz": float(sc.model.fdi.rate_hz),
+              **{k: v for k, v in m.params.items() if k not in ENTRY_KEYS}}
+    det = build_detector(DetectorSpec(m.id, params), None)
+    return det, f"{m.id}: the two engines' gauges against each other"
+
+
 #: how each detector family is designed for a bank (:func:`member_stream`); every other id: its factory
 _DESIGNERS: dict[str, Callable[[MemberContext, MemberSpec], tuple[Any, str]]] = {
     "kalman-gust-v1": _gust_stream,
     "lmi-detection-v1": _continuous_stream,
     "pca-v1": _pca_stream,
+    "engine-gauges-v1": _engine_gauge_stream,
     **{f"kinematic-{k}-v1": _kinematic_stream for k in ("attitude", "altitude", "airspeed", "flow-angles")},
 }
 
