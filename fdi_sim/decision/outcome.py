@@ -57,6 +57,18 @@ def _matches(isolation: str | None, target: str) -> bool | None:
     return isolation == target or isolation.startswith(target + "_")
 
 
+def not_monitored(hypotheses: Sequence[str], faults: Sequence[Mapping[str, Any]]) -> tuple[tuple[str, str], ...]:
+    """The injected faults no hypothesis of a bank names (``(label, target)``): none of its members
+    could isolate them right, so a miss is by design, not by chance (icing, ``airframe``: no bank
+    has an icing hypothesis). A fault without a window (never active) is left out."""
+    out = []
+    for f in faults:
+        target = str(f.get("target", ""))
+        if f.get("windows_s") and not any(_matches(h, target) for h in hypotheses):
+            out.append((str(f["label"]), target))
+    return tuple(out)
+
+
 def alarm_onsets(alarm: NDArray[np.bool_]) -> int:
     """Rising edges of an alarm sequence (an alarm at the first sample counts as one)."""
     a = np.asarray(alarm, dtype=bool)

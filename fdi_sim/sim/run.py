@@ -60,6 +60,7 @@ from fdi_sim.sensors import SensorSuite, apply_overrides, load_suite
 import fdi_sim.sim._core as _core  # the module itself (from fdi_sim.sim import: a package cycle)
 from fdi_sim.bank.members import bank_members
 from fdi_sim.bank.runtime import BankAlarm, FaultDetection, FdiBank, fdi_outcomes
+from fdi_sim.decision.outcome import not_monitored
 from fdi_sim.units import DEG_PER_RAD, RAD_PER_DEG
 
 OP_SIGNALS = ("h_ft", "vc_kts", "mach", "alpha_rad", "flaps_deg", "icing_eta")
@@ -177,6 +178,9 @@ class RunSummary:
     fdi_alarms: tuple[BankAlarm, ...] = ()
     #: each member's threshold (the gust filter's at its first schedule point)
     fdi_thresholds: tuple[float, ...] = ()
+    #: ``(label, target)`` of the injected faults no member has a hypothesis for
+    #: (:func:`fdi_sim.decision.outcome.not_monitored`)
+    fdi_not_monitored: tuple[tuple[str, str], ...] = ()
 
     @property
     def realtime_factor(self) -> float:
@@ -197,6 +201,8 @@ class RunSummary:
             out = fdi_outcome_lines(self.fdi_detections, self.fdi_false_alarms)
             n_det = len(self.fdi_detections)
             lines += out[:n_det]
+            lines += [f"  {lab:22} not monitored: no member of this bank has a hypothesis for {tgt!r}"
+                      for lab, tgt in self.fdi_not_monitored]
             for r in self.fdi_reconfigurations:
                 extra = (f", effectiveness {r['effectiveness']:.2f} +- {r['effectiveness_std']:.2f}, command x "
                          f"{r['scale']:.2f}" if "scale" in r else "")
@@ -527,7 +533,8 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         fdi = dict(fdi_detectors=tuple(m.id for m in bank.members), fdi_detections=det, fdi_false_alarms=false,
                    fdi_reconfigurations=tuple(bank.reconfig_events), fdi_notes=bank.notes,
                    fdi_alarms=tuple(bank.alarms),
-                   fdi_thresholds=tuple(m["threshold"] for m in json.loads(bank_metadata(bank)["members"])))
+                   fdi_thresholds=tuple(m["threshold"] for m in json.loads(bank_metadata(bank)["members"])),
+                   fdi_not_monitored=not_monitored(bank.hypotheses, faults))
     summary = RunSummary(
         scenario=sc.name, aircraft=sc.aircraft, seed=sc.seed, status=status, reason=reason, t_end_s=t_end_s,
         steps=steps,
