@@ -55,11 +55,36 @@ def training_seeds(n: int) -> tuple[int, ...]:
     return s[:n]
 
 
+#: the share of a calibration's training flights that may depart (``diverged``) and be replaced by
+#: the next seeds of the training set before the calibration is refused [-]. Why: a departure in
+#: one of 24 fault-free flights (a gust that upsets a flapped DHC-6 on approach, seed 1000002 in
+#: issue 25) refused the whole scenario although the same scenario flew on other seeds; a quarter
+#: departing says the scenario itself does not fly, and it is refused with the count.
+MAX_DEPARTED_FRACTION = 0.25
+
+
+class TrainingLogs(list):
+    """The training flights' logs (a list), and the flights that departed and were replaced.
+
+    Attributes
+    ----------
+    departed : tuple of (int, str)
+        ``(seed, reason)`` of each flight that departed, in the order flown.
+    """
+
+    departed: tuple[tuple[int, str], ...] = ()
+
+
 def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress: bool = True,
-                 label: str = "") -> list[Any]:
+                 label: str = "") -> TrainingLogs:
     """Fly the fault-free training flights; return their logs: the measurement and command topics,
     kept in memory as the log would hold them (``run(..., keep_rows=True)``: no per-step topic is
     written or read back, which was half a training flight's cost).
+
+    A flight that departs (ends ``diverged``) is replaced by the next seed of the registry's
+    training set after the given ones and counted (:attr:`TrainingLogs.departed`), up to
+    :data:`MAX_DEPARTED_FRACTION` of ``len(seeds)``; only training-set seeds are replaced (other
+    seeds, a card's held-out flights, have no spares of their role).
 
     Parameters
     ----------
@@ -73,30 +98,57 @@ def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress
         when stderr is a terminal.
     label : str
         Put before the progress line (which calibration this is: ``"point 2/4 (h 12000 ft, vc 320 kt): "``).
+
+    Raises
+    ------
+    DesignError
+        A flight ended ``error`` or ``timeout``, or more flights departed than allowed (how many, which).
     """
     from fdi_sim.sim.run import run
 
-    logs = []
+    logs = TrainingLogs()
+    departed: list[tuple[int, str]] = []
+    pool = _seeds("training")
+    given = [int(s) for s in seeds]
+    spares = iter(pool[pool.index(max(given)) + 1:] if given and set(given) <= set(pool) else ())
+    allowed = int(MAX_DEPARTED_FRACTION * len(given))
+    queue = list(given)
     t0 = time.perf_counter()
     show = progress and sys.stderr.isatty()
     with tempfile.TemporaryDirectory(prefix="fdi-sim-train-") as tmp:
-        for i, seed in enumerate(seeds):
+        i = 0
+        while i < len(queue):
+            seed = queue[i]
+            i += 1
             res = run(fault_free(sc, seed, duration_s), tmp, progress=False, keep_rows=True)
             if res.status == "interrupted":  # Ctrl-C / SIGTERM during calibration: stop like any run
                 raise KeyboardInterrupt(f"calibration interrupted during training flight seed {seed}")
+            Path(res.log_path).unlink(missing_ok=True)
+            if res.status == "diverged":
+                departed.append((seed, res.summary.reason))
+                spare = next(spares, None)
+                if len(departed) > allowed or spare is None:
+                    which = "; ".join(f"seed {s}: {r}" for s, r in departed)
+                    raise DesignError(f"{sc.source}: {len(departed)} of {len(given) + len(departed) - 1} fault-free "
+                                      f"training flights departed (at most {allowed} of {len(given)} may be replaced"
+                                      f"{'' if spare is not None else ', and no spare seed is left'}): {which}; a "
+                                      "detector cannot be calibrated on a scenario that does not fly without its "
+                                      "faults")
+                queue.append(spare)
+                continue
             if res.status != "completed":
                 raise DesignError(f"{sc.source}: fault-free training flight seed {seed} ended {res.status} "
                                   f"({res.summary.reason}); a detector cannot be calibrated on a scenario that does not "
                                   "fly without its faults")
             logs.append(res.rows)  # measurements and commands, kept in memory: no topic written or read back
-            Path(res.log_path).unlink()
             if show:
                 el = time.perf_counter() - t0
-                rate = (i + 1) * duration_s / el
-                print(f"\r{label}calibration flights {i + 1}/{len(seeds)}  {rate:.0f} sim s/s  "
-                      f"ETA {(len(seeds) - i - 1) * el / (i + 1):.0f} s", end="", file=sys.stderr, flush=True)
+                rate = len(logs) * duration_s / el
+                print(f"\r{label}calibration flights {len(logs)}/{len(given)}  {rate:.0f} sim s/s  "
+                      f"ETA {(len(given) - len(logs)) * el / max(1, i):.0f} s", end="", file=sys.stderr, flush=True)
     if show:
         print(file=sys.stderr)
+    logs.departed = tuple(departed)
     return logs
 
 
@@ -110,6 +162,11 @@ class LazyTraining:
 
     def __len__(self) -> int:
         return self.n
+
+    @property
+    def departed(self) -> tuple[tuple[int, str], ...]:
+        """``(seed, reason)`` of the flights that departed and were replaced (once flown)."""
+        return self._logs.departed if self._logs is not None else ()
 
     def __iter__(self):
         if self._logs is None:

@@ -274,7 +274,8 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
             logs = training_logs
             if logs is None:
                 logs = fly_training(sc, training_seeds(f.calibration_flights), f.calibration_duration_s, progress=progress)
-            logs = list(logs)
+            src, logs = logs, list(logs)
+            departed = tuple(getattr(src, "departed", ()))  # flights replaced by spares (fly_training)
             d = bank.decision
             episodes = d.rule == "persistence"  # the angle rule's exceedance also needs a direction
             stats: list[list[np.ndarray]] = [[] for _ in bank.members]
@@ -291,6 +292,8 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
             rate = float(f.far_per_h) / max(1, len(bank.members))
             rec = {"p_per_sample": p, "episodes_per_h": rate if episodes else None,
                    "confidence": THRESHOLD_CONFIDENCE, "members": []}
+            if departed:
+                rec["training_departed"] = [[int(seed), str(reason)] for seed, reason in departed]
             rng = np.random.default_rng(0)  # the bootstrap's resampling: fixed, so a calibration is reproducible
             for i, (mem, s) in enumerate(zip(bank.members, stats)):
                 s = [x[np.isfinite(x)] for x in s]
