@@ -259,6 +259,17 @@ class Aircraft:
         (Python's ``sum``), times its factor: :meth:`list_reader`'s value (the loop's compiled core,
         :mod:`fdi_sim.sim._core`, combines them).
         """
+        nodes, plan = self.flat_nodes(names, extra)
+        get = jsbsim.FGPropertyNode.get_double_value
+
+        def read() -> list[float]:
+            return list(map(get, nodes))
+
+        return read, plan
+
+    def flat_nodes(self, names: Sequence[str], extra: Sequence[str] = ()
+                   ) -> tuple[list[object], list[tuple[int, int, float | None]]]:
+        """The property nodes :meth:`flat_reader` reads, in its order, and its plan."""
         nodes: list[object] = []
         plan: list[tuple[int, int, float | None]] = []
         for name in names:
@@ -266,12 +277,20 @@ class Aircraft:
             plan.append((len(nodes), len(nodes) + len(props), self._signal_factor(name)))
             nodes.extend(self.node(p) for p in props)
         nodes.extend(self.node(p) for p in extra)
-        get = jsbsim.FGPropertyNode.get_double_value
+        return nodes, plan
 
-        def read() -> list[float]:
-            return list(map(get, nodes))
+    def command_nodes(self) -> list[object]:
+        """The nodes :meth:`command_writer` writes: elevator, aileron, rudder, then every engine's throttle."""
+        return ([self.node(p) for p in ("fcs/elevator-cmd-norm", "fcs/aileron-cmd-norm", "fcs/rudder-cmd-norm")]
+                + [self.node(f"fcs/throttle-cmd-norm[{i}]") for i in range(self.n_engines)])
 
-        return read, plan
+    def native(self) -> object:
+        """The compiled core's access to this model's JSBSim (:func:`fdi_sim.aircraft.native.bind`,
+        every assumption checked; raises ``NativeUnavailable`` with the reason). Bound anew at each
+        call: a reloaded model has new pointers."""
+        from fdi_sim.aircraft.native import bind
+
+        return bind(self.fdm)
 
     def read(self, names: Sequence[str]) -> NDArray[np.float64]:
         """Read the named signals once (slow path; use :meth:`reader` in loops)."""

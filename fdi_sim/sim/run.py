@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fdi_sim import registry, signals
 from fdi_sim.aircraft import (
@@ -181,6 +182,8 @@ class RunSummary:
     #: ``(label, target)`` of the injected faults no member has a hypothesis for
     #: (:func:`fdi_sim.decision.outcome.not_monitored`)
     fdi_not_monitored: tuple[tuple[str, str], ...] = ()
+    #: which loop flew: ``"compiled"`` (:mod:`fdi_sim.sim._chunk`) or ``"python: <why not compiled>"``
+    core: str = ""
 
     @property
     def realtime_factor(self) -> float:
@@ -195,6 +198,9 @@ class RunSummary:
             f"holds      max |dh| {self.max_abs_dh_ft:.1f} ft, max |dVc| {self.max_abs_dvc_kts:.2f} kt (gust removed), "
             f"max |dphi| {self.max_abs_dphi_deg:.2f} deg",
         ]
+        if self.core:
+            lines.append("core       compiled chunk core" if self.core == "compiled" else
+                         f"core       Python loop ({self.core.removeprefix('python: ')})")
         if self.fdi_detectors:
             lines.append(f"fdi bank   {', '.join(self.fdi_detectors)}")
             lines += [f"           {n}" for n in self.fdi_notes]
@@ -248,6 +254,13 @@ class _Rows:
         self._t_s[i] = t_s
         self._rows[i][...] = values
         self.i = i + 1
+
+    def write_rows(self, t_s: NDArray[np.float64], values: NDArray[np.float64]) -> None:
+        """Several rows at once (the compiled core's chunk): the same numbers as one ``write`` each."""
+        i, n = self.i, len(t_s)
+        self.data[i:i + n, 0] = t_s
+        self.data[i:i + n, 1:] = values
+        self.i = i + n
 
     def topic_data(self) -> VectorTopic:
         data = self.data[:self.i]
@@ -416,6 +429,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
     status, reason = "error", ""
     stats = np.zeros(3)
     steps = 0
+    core_used = ""
     bank = None
     injector = None
     tr = None
@@ -505,9 +519,9 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             writer.move_to(out)
             flying = True
             wall0 = time.perf_counter()  # the loop's wall time (the set-up, trim and bank design before it)
-            status, reason, t_status_s, stats, steps = _loop(sc, ac, sensors, pilot,
-                                                             (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress,
-                                                             injector, fault_channels, stop, bank, per_step)
+            status, reason, t_status_s, stats, steps, core_used = _loop(
+                sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress, injector, fault_channels,
+                stop, bank, per_step, writer=writer if (per_step and not keep_rows) else None)
             ch_status.write(t_status_s, {"status": status, "message": reason})
         except KeyboardInterrupt:
             if flying:  # raised by hand inside the loop's callees: still a finished log
@@ -540,7 +554,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
         steps=steps,
         wall_s=wall, max_abs_dh_ft=float(stats[0]), max_abs_dvc_kts=float(stats[1]), max_abs_dphi_deg=float(stats[2]),
         trim_throttle_norm=tr.throttle_cmd_norm if tr else math.nan,
-        trim_alpha_deg=tr.alpha_rad * DEG_PER_RAD if tr else math.nan, **fdi,
+        trim_alpha_deg=tr.alpha_rad * DEG_PER_RAD if tr else math.nan, core=core_used, **fdi,
     )
     rows = None
     if keep_rows:
@@ -607,8 +621,16 @@ def check_log_path(out: Path, scenario_source: str, *, force: bool = False) -> N
 
 def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channels: tuple, progress: bool | None,
           inj: FaultInjector | None, fault_channels: tuple | None, stop: StopRequest, bank: FdiBank | None = None,
-          per_step: bool = True):
-    """The per-step loop; returns (status, reason, time of the status [s], max deviations, steps).
+          per_step: bool = True, writer: FlightLogWriter | None = None):
+    """The per-step loop; returns (status, reason, time of the status [s], max deviations, steps,
+    which core flew).
+
+    A fault-free flight flies the compiled chunk core (:mod:`fdi_sim.sim._chunk`, many steps per
+    compiled call, JSBSim called through its own symbols) where :mod:`fdi_sim.aircraft.native`
+    allows it (``FDI_SIM_CORE``), with the same numbers as the Python loop below; otherwise, and
+    for a faulty flight (the injector works on lists), the Python loop. ``writer`` (the log's, when
+    it logs per step): the chunks end at its flush windows, so the log's bytes are the Python
+    loop's.
 
     The truth, its divergence checks, the sensors, the pilot and the deviation statistics are one
     compiled call a step (:mod:`fdi_sim.sim._core`); a faulty flight measures and flies the pilot
@@ -682,8 +704,16 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     corrected = False
     scale = None  # the bank's command rescale (elevator, aileron, rudder, throttle), once it sets one
     has_dropout = inj is not None and inj.has_dropout
+    nat, core_used = _native_core(ac, inj)
     try:
-        for k in range(n_steps + 1):
+        if nat is not None:
+            done = [0]  # steps complete, for the finally below when a divergence is raised
+            status, reason, t_s = _fly_chunks(
+                nat, ac, truth_names, n_steps, dt, x_arr, y, u_arr, cmd_rows, bank, n_fdi, K, S, meas_rows, s_tab,
+                s_off, p_state, p_par, aux, refill, per_step, log_state, channels, writer, flaps_deg,
+                (i_h, i_vc, i_mach, i_alpha), stop, bar, done, lim)
+            steps = done[0]
+        for k in range(n_steps + 1) if nat is None else ():
             if stop.requested:  # between two steps: every topic holds steps 0 .. k-1
                 status, reason = "interrupted", stop.reason
                 t_s = (k - 1) * dt if k else 0.0
@@ -767,8 +797,12 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
                 last_shown = k
     except SimulationDiverged as exc:
         status, reason, t_s = "diverged", exc.reason, exc.t_s
+        if nat is not None:
+            steps = done[0]
     except KeyboardInterrupt:  # raised inside a callee (no handler installed): end cleanly all the same
         status, reason = "interrupted", stop.reason or "stopped by the user (Ctrl-C)"
+        if nat is not None:
+            steps = done[0]
     finally:
         if bar is not None:
             bar.close()
@@ -776,7 +810,133 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
             # the partial last block: samples whose step completed (the replay of the log sees the same)
             bank.flush(steps - 1, dt)
             bank.close((steps - 1) * dt)
-    return status, reason, t_s, aux[[_core.MAX_DH, _core.MAX_DV, _core.MAX_DPHI]].copy(), steps
+    return status, reason, t_s, aux[[_core.MAX_DH, _core.MAX_DV, _core.MAX_DPHI]].copy(), steps, core_used
+
+
+#: steps per compiled chunk at most: 1 s simulated, about 1-1.5 ms of wall time, so a stop request
+#: and the progress bar are seen within that
+CHUNK_STEPS = 120
+
+
+def _native_core(ac: Aircraft, inj: FaultInjector | None) -> tuple[object | None, str]:
+    """The compiled core's binding for this flight, or None and why not (``FDI_SIM_CORE``)."""
+    from fdi_sim.aircraft.native import NativeUnavailable, core_mode
+
+    if inj is not None:
+        return None, "python: a faulty flight (the fault injector works on lists)"
+    mode = core_mode()
+    if mode == "python":
+        return None, "python: FDI_SIM_CORE=python"
+    try:
+        return ac.native(), "compiled"
+    except NativeUnavailable as exc:
+        if mode == "compiled":
+            raise NativeUnavailable(f"FDI_SIM_CORE=compiled, but the compiled core cannot run here: {exc}") from None
+        return None, f"python: {exc}"
+
+
+def _fly_chunks(nat, ac, truth_names, n_steps, dt, x_arr, y, u_arr, cmd_rows, bank, n_fdi, K, S, meas_rows, s_tab,
+                s_off, p_state, p_par, aux, refill, per_step, log_state, channels, writer, flaps_deg, op_idx, stop,
+                bar, done, lim):
+    """The fast path through the compiled chunk core (:mod:`fdi_sim.sim._chunk`); returns (status,
+    reason, time of the status [s]), ``done[0]`` the steps complete; raises SimulationDiverged as
+    the Python loop does. Between two chunks: a stop request, the bank's blocks, the sensors' noise
+    refill, the log rows (``write_rows``, one call per channel and chunk, within one flush window
+    of ``writer``) and the progress bar."""
+    import fdi_sim.sim._chunk as _chunk
+
+    ch_truth, ch_surf, ch_op, ch_cmd, ch_meas = channels
+    n_truth = len(truth_names)
+    read_nodes, _ = ac.flat_nodes(truth_names, extra=("position/h-agl-ft",))
+    rp = nat.node_pointers(read_nodes)
+    cp = nat.node_pointers(ac.command_nodes())
+    s_nodes, s_plan = ac.flat_nodes(SURFACE_SIGNALS) if log_state else ([], [])
+    sp = nat.node_pointers(s_nodes) if s_nodes else np.zeros(0, dtype=np.uintp)
+    CH = CHUNK_STEPS
+    bt, btruth, bmeas, bcmd, bop, bsurf = _chunk.buffers(CH, n_truth, len(y), len(u_arr), max(1, len(sp)))
+    use_bank = bank is not None
+    rows = cmd_rows if use_bank else np.zeros((1, len(u_arr)))
+    mrows = meas_rows if use_bank else np.zeros((1, len(y)))
+    state = np.array([0, 0, 0, 0, n_fdi], dtype=np.int64)
+    corr, yp, scale = np.zeros(len(y)), np.empty(len(y)), np.ones(4)
+    corrected = has_scale = False
+    msg_addr = nat.message.ctypes.data
+    i_h, i_vc, i_mach, i_alpha = op_idx
+    period = writer.flush_period_s if writer is not None else 0.0
+    shown = 0
+    while True:
+        k = int(state[_chunk.S_K])
+        if stop.requested and state[_chunk.S_PHASE] == 0:  # between two steps: every topic holds 0 .. k-1
+            return "interrupted", stop.reason, (k - 1) * dt if k else 0.0
+        k_end = min(k + CH, n_steps + 1)
+        if writer is not None:  # rows of one chunk within one flush window (the Python loop's chunks)
+            hi = writer.window_end_s
+            if k * dt >= hi:  # this chunk's first write flushes: the window it opens
+                hi = (math.floor(k * dt / period) + 1) * period
+            while k_end > k + 1 and (k_end - 1) * dt >= hi:
+                k_end -= 1
+        state[_chunk.S_ROWS] = 0
+        code = _chunk.run_chunk(state, k_end, n_steps, dt, nat.run_shim, nat.run, nat.fdm, msg_addr,
+                                len(nat.message), nat.get, nat.set, rp, n_truth, cp, sp, x_arr, y, yp, u_arr, rows,
+                                use_bank, n_fdi, K, S, mrows, corrected, corr, has_scale, scale, s_tab, s_off,
+                                p_state, p_par, aux, per_step, log_state, bt, btruth, bmeas, bcmd, bop, bsurf,
+                                flaps_deg, i_h, i_vc, i_mach, i_alpha)
+        r = int(state[_chunk.S_ROWS])
+        k_now = int(state[_chunk.S_K])
+        done[0] = k_now  # rows 0 .. k_now - 1 complete (at BLOCK the step k_now is half done)
+        if per_step and r:
+            if log_state:
+                ch_truth.write_rows(bt[:r], btruth[:r])
+            ch_meas.write_rows(bt[:r], bmeas[:r])
+            ch_cmd.write_rows(bt[:r], bcmd[:r])
+            if log_state:
+                ch_op.write_rows(bt[:r], bop[:r])
+                n_s = r - 1 if code in (_chunk.END, _chunk.STOPPED, _chunk.EXCEPTION) else r  # no surfaces after the last step
+                if n_s:
+                    ch_surf.write_rows(bt[:n_s], _combine(bsurf[:n_s], s_plan))
+        if bar is not None and k_now - shown >= 120:
+            bar.update((k_now - shown) * dt)
+            shown = k_now
+        if code == _chunk.LIMIT:
+            continue
+        if code == _chunk.END:
+            return "completed", "", (k_now - 1) * dt
+        if code == _chunk.BLOCK:  # the bank's block at step k_now (its sample stored); the step resumes after it
+            if bank.end_block(k_now, dt):
+                corrected, scale_t = bool(bank.corrections), bank.command_scale
+                for c in bank.corrections:
+                    corr[c.index] = c.fault_estimate
+                if scale_t is not None:
+                    has_scale, scale[:] = True, scale_t
+            elif bank.corrections:  # the estimates move every block
+                for c in bank.corrections:
+                    corr[c.index] = c.fault_estimate
+            continue
+        if code == _core.REFILL:  # the sensors' noise block ran out: nothing of the step was done
+            refill()
+            continue
+        t_fail = (k_now - 1) * dt if code in (_chunk.STOPPED, _chunk.EXCEPTION) else k_now * dt
+        if code == _chunk.STOPPED:
+            raise SimulationDiverged(t_fail, "JSBSim stopped the run")
+        if code == _chunk.EXCEPTION:
+            raise SimulationDiverged(t_fail, f"JSBSim threw a C++ exception in FGFDMExec::Run(): "
+                                     f"{nat.exception_message()}")
+        raise SimulationDiverged(t_fail, _core.divergence_reason(code, x_arr[:n_truth].tolist(), truth_names, lim))
+
+
+def _combine(flat: NDArray[np.float64], plan: Sequence[tuple[int, int, float | None]]) -> NDArray[np.float64]:
+    """Signals from their flat property reads, per row (:meth:`Aircraft.list_reader`'s values bit
+    for bit: a summed signal is ``0 + a + b``, Python's ``sum``; a scaled one ``factor * value``)."""
+    out = np.empty((flat.shape[0], len(plan)))
+    for i, (a, b, f) in enumerate(plan):
+        if b - a == 1:
+            v = flat[:, a]
+        else:
+            v = np.zeros(flat.shape[0])
+            for j in range(a, b):
+                v = v + flat[:, j]
+        out[:, i] = v if f is None else f * v
+    return out
 
 
 def _progress_bar(sc: Scenario, progress: bool | None):
