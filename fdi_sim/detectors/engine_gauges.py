@@ -289,6 +289,11 @@ def make_engine_gauges(model: Any = None, aircraft: str | None = None, turbulenc
     """The registered factory: ``aircraft`` (or ``model.meta["aircraft"]``) and the options of
     :func:`design_engine_gauges` (``rate_hz`` [Hz] defaults to the model's, else 20). ``turbulence``
     is accepted and unused (the gauges' differences do not see it)."""
+    names = tuple(getattr(model, "output_names", ()) or ())
+    if model is not None and not set(GAUGES) <= set(names):  # a linearizer's model: no engine gauges
+        raise DesignError(f"{DETECTOR_ID} needs the measurements {', '.join(g for g in GAUGES if g not in names)}, "
+                          "which the model does not output (build it from the log's measurements: the bank and "
+                          "`fdi-sim detect` do)")
     ac = aircraft or (getattr(model, "meta", None) or {}).get("aircraft")
     if not ac:
         raise DesignError(f"{DETECTOR_ID} needs the aircraft (aircraft = \"DHC6\", or a model that names it)")

@@ -185,6 +185,12 @@ def _run_spec(spec: DetectorSpec, lm: LogModel, log: FlightLog, samples: Samples
         det = build_detector(DetectorSpec(spec.id, params), None)
         return run_vectorised(det, spec.id, log_samples(log, MeasurementSet(), rate_hz, sensor_rates_hz=rates),
                               float(det.design.threshold))
+    if spec.id == "engine-gauges-v1":  # the engines' gauges against each other: the log's measurements
+        from fdi_sim.detectors.kinematic import MeasurementSet
+
+        det = build_detector(DetectorSpec(spec.id, {"aircraft": sc.aircraft, "rate_hz": rate_hz, **spec.params}), None)
+        gauges = MeasurementSet(output_names=tuple(det.output_names))
+        return run_stream(det, spec.id, log_samples(log, gauges, rate_hz, sensor_rates_hz=rates), gauges)
     det = build_detector(spec, lm.model)
     from fdi_sim.detectors.stream import StreamingDetector
 

@@ -43,7 +43,7 @@ from fdi_sim.scenario.shipped import shipped_dir
 from fdi_sim.training.flights import DEFAULT_TARGET, fly_training, training_seeds
 from fdi_sim.decision.outcome import alarm_onsets, fault_outcome
 from fdi_sim.detectors.spec import build_detector, DetectorSpec
-from fdi_sim.offline.detect import DetectorTrace, fault_windows, run_detector, run_vectorised
+from fdi_sim.offline.detect import DetectorTrace, fault_windows, run_detector, run_stream, run_vectorised
 from fdi_sim.training.models import LogModel, model_for_scenario
 
 RATE_HZ = 20.0
@@ -134,6 +134,11 @@ class _Runner:
             self.det = build_detector(DetectorSpec(ident, {"turbulence": sc.model.atmosphere.turbulence,
                                                            "aircraft": sc.aircraft}), None)
             self._model = MeasurementSet()
+        elif ident == "engine-gauges-v1":  # the engines' gauges: the log's measurements, no model
+            from fdi_sim.detectors.kinematic import MeasurementSet
+
+            self.det = build_detector(DetectorSpec(ident, {"aircraft": sc.aircraft, "rate_hz": RATE_HZ}), None)
+            self._model = MeasurementSet(output_names=tuple(self.det.output_names))
         elif ident == "lmi-detection-v1":
             self.det = build_detector(DetectorSpec(ident, {"dt_s": 1.0 / RATE_HZ}), lm.continuous())
             self._model = lm.model
@@ -152,6 +157,8 @@ class _Runner:
         if hasattr(self.det, "run"):  # kalman-gust-v1, the kinematic checks
             thr = self.det.threshold if self.id == "kalman-gust-v1" else float(self.det.design.threshold)
             return run_vectorised(self.det, self.id, s, thr)
+        if hasattr(self.det, "process_block"):  # a stream only (the engine-gauge check)
+            return run_stream(self.det, self.id, s, self._model)
         return run_detector(self.det, self.id, s, self._model)
 
 
