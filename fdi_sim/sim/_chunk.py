@@ -141,6 +141,17 @@ def _check_cache() -> None:
 _check_cache()
 
 
+def prime(nat, s_tab, s_off, p_state, p_par) -> None:
+    """Load (or compile) :func:`run_chunk` for the argument types the loop passes, with a call that
+    flies no step (``k_end = 0``): numba's first call costs 0.3-0.6 s, which belongs to the set-up,
+    not to the flight (a stop in that time would end a flight with no step)."""
+    f1, f2, u1 = np.zeros(1), np.zeros((1, 1)), np.zeros(1, dtype=np.uintp)
+    state = np.zeros(5, dtype=np.int64)
+    run_chunk(state, 0, 0, 1.0, nat.run_shim, nat.run, nat.fdm, nat.message.ctypes.data, len(nat.message), nat.get,
+              nat.set, u1, 0, u1, u1, f1, f1, f1, f1, f2, False, 1, 1, 1, f2, False, f1, False, f1, s_tab, s_off,
+              p_state, p_par, f1, False, False, f1, f2, f2, f2, f2, f2, 0.0, 0, 0, 0, 0)
+
+
 def buffers(n_rows: int, n_truth: int, n_meas: int, n_cmd: int, n_surf_flat: int) -> tuple[np.ndarray, ...]:
     """The log-row buffers of a chunk of ``n_rows`` steps: t, truth, measurements, commands,
     operating point (6), surfaces (their flat reads)."""

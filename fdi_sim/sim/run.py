@@ -508,6 +508,12 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
                 bank.attach(writer, log_residuals=sc.model.fdi.log_residuals)
                 bank.start_at(sc.model.initial.h_ft, tr.vc_kts)
                 writer.add_metadata(METADATA_FDI, bank_metadata(bank))
+            # the loop's core: compiled (bound to this JSBSim and loaded now, in the set-up) or Python
+            native_core = _native_core(ac, injector)
+            if native_core[0] is not None:
+                import fdi_sim.sim._chunk as _chunk
+
+                _chunk.prime(native_core[0], *sensors.compiled()[1:3], *pilot.compiled()[1:])
             if stop.requested:  # a signal whose KeyboardInterrupt was swallowed during the set-up
                 raise KeyboardInterrupt
             # from here on a stop request only sets a flag that the loop reads once per step
@@ -521,7 +527,7 @@ def run(sc: Scenario, out_dir: str | Path = "runs", *, log_path: str | Path | No
             wall0 = time.perf_counter()  # the loop's wall time (the set-up, trim and bank design before it)
             status, reason, t_status_s, stats, steps, core_used = _loop(
                 sc, ac, sensors, pilot, (ch_truth, ch_surf, ch_op, ch_cmd, ch_meas), progress, injector, fault_channels,
-                stop, bank, per_step, writer=writer if (per_step and not keep_rows) else None)
+                stop, bank, per_step, writer=writer if (per_step and not keep_rows) else None, native_core=native_core)
             ch_status.write(t_status_s, {"status": status, "message": reason})
         except KeyboardInterrupt:
             if flying:  # raised by hand inside the loop's callees: still a finished log
@@ -621,7 +627,8 @@ def check_log_path(out: Path, scenario_source: str, *, force: bool = False) -> N
 
 def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channels: tuple, progress: bool | None,
           inj: FaultInjector | None, fault_channels: tuple | None, stop: StopRequest, bank: FdiBank | None = None,
-          per_step: bool = True, writer: FlightLogWriter | None = None):
+          per_step: bool = True, writer: FlightLogWriter | None = None,
+          native_core: tuple[object | None, str] | None = None):
     """The per-step loop; returns (status, reason, time of the status [s], max deviations, steps,
     which core flew).
 
@@ -630,7 +637,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     allows it (``FDI_SIM_CORE``), with the same numbers as the Python loop below; otherwise, and
     for a faulty flight (the injector works on lists), the Python loop. ``writer`` (the log's, when
     it logs per step): the chunks end at its flush windows, so the log's bytes are the Python
-    loop's.
+    loop's. ``native_core``: :func:`_native_core`'s answer, made in the set-up (else made here).
 
     The truth, its divergence checks, the sensors, the pilot and the deviation statistics are one
     compiled call a step (:mod:`fdi_sim.sim._core`); a faulty flight measures and flies the pilot
@@ -704,7 +711,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     corrected = False
     scale = None  # the bank's command rescale (elevator, aileron, rudder, throttle), once it sets one
     has_dropout = inj is not None and inj.has_dropout
-    nat, core_used = _native_core(ac, inj)
+    nat, core_used = native_core if native_core is not None else _native_core(ac, inj)
     try:
         if nat is not None:
             done = [0]  # steps complete, for the finally below when a divergence is raised

@@ -32,6 +32,7 @@ as before and its log says why.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -104,11 +105,17 @@ def fingerprint(arrays: Sequence[Any]) -> list[list[float]]:
     return out
 
 
+@functools.lru_cache(maxsize=64)
 def _basis(n: int) -> NDArray[np.float64]:
+    """The projection vectors for arrays of ``n`` values (read-only; kept: drawing them was half of
+    a study run's atlas lookup, 0.23 s of 0.4 s, measured on an F-16 envelope run)."""
     if n == 0:
-        return np.zeros((_FP_PROJECTIONS, 0))
-    v = np.random.default_rng([_FP_BASIS_KEY, n]).standard_normal((_FP_PROJECTIONS, n))
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
+        v = np.zeros((_FP_PROJECTIONS, 0))
+    else:
+        v = np.random.default_rng([_FP_BASIS_KEY, n]).standard_normal((_FP_PROJECTIONS, n))
+        v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    v.flags.writeable = False
+    return v
 
 
 def fingerprint_distance(fp: Sequence[Sequence[float]], ref: Sequence[Sequence[float]]) -> float:
