@@ -9,8 +9,8 @@ training flight), raising its thresholds on its own turbulence estimate. The dev
 (seeds 15101/15102) were looked at while the schedule's exponents and the noise cover were set;
 the hold-out studies were flown once after that (the F-16's on seed 15003: its first seed, 15001,
 flown with the accelerometer's schedule, is development now; the DHC-6's on 15004, 52 h asked
-for: its first seed, 15002, flown with the five-member bank before the engine-gauge check joined,
-is development now). Counts are the members' alarm
+for: its first seed, 15002, on which 3 severe-air runs departed and left 49.5 h, is development
+now). Counts are the members' alarm
 episodes outside any fault (a bank episode raised by two members counts twice), per armed
 fault-free hour (:func:`fdi_sim.study.stats.exposure_s`); intervals are 95 %, scaled by the
 dispersion across runs (:func:`fdi_sim.study.stats.overdispersed_rate`).

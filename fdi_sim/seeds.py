@@ -91,18 +91,17 @@ REGISTRY: tuple[SeedSet, ...] = (
             ("studies/f16_validation", "studies/dhc6_validation"),
             "fresh fault-free studies at the calibration studies' conditions: each checks its thresholds file once"),
     SeedSet("envelope-hold-out-1", "development", (15001, 15002),
-            ("fdi_sim/bank/turbulence.py", "fdi_sim/detectors/engine_gauges.py"),
+            ("fdi_sim/bank/turbulence.py", "fdi_sim/seeds.py"),
             "the envelope hold-outs' first seeds, each flown once (2026-12-04): the F-16's with the schedule "
             "on the vertical accelerometer (24 alarms in 49.6 h, all in severe air: its severe runs then "
-            "set the F-16's pitch-gyro schedule); the DHC-6's with the five-member bank (2 alarms in 49.4 h, "
-            "3 severe-air runs departed, so 0.5 h short of the bar's 50); the DHC-6 bank then gained the "
-            "engine-gauge check, so both are development now"),
+            "set the F-16's pitch-gyro schedule); the DHC-6's (2 alarms in 49.4 h; 3 severe-air runs "
+            "departed, leaving 49.5 h of the bar's 50: the study was then asked for 52 h, on a new seed). "
+            "Both are development now"),
     SeedSet("envelope-hold-out", "hold-out", (15003, 15004),
             ("studies/f16_envelope_hold_out", "studies/dhc6_envelope_hold_out"),
             "fault-free studies across each aircraft's envelope, no to severe turbulence (issue 24's bar); "
-            "the F-16's second seed (its schedule changed after the first), the DHC-6's second (its bank "
-            "gained the engine-gauge check after the first; 52 h asked for, so that departures in severe "
-            "air leave 50)"),
+            "the F-16's second seed (its schedule changed after the first), the DHC-6's second (52 h asked "
+            "for, so that departures in severe air leave 50; the bank is the one the first was flown with)"),
     SeedSet("engine-gauge-development", "development", _r(900, 906),
             ("fdi_sim/detectors/engine_gauges.py", "fdi_sim/bank/turbulence.py"),
             "six fault-free 300 s DHC-6 flights (light to severe air) the engine-gauge check's scales, its "
