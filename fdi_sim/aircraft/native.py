@@ -209,11 +209,16 @@ def _shim() -> Any:
         return _SHIM
     tag = hashlib.sha256((_SHIM_SOURCE + platform.machine() + sys.platform).encode()).hexdigest()[:16]
     lib_path = _cache_dir() / f"fdi_sim_run_{tag}.so"
+    try:
+        lib_path.parent.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.NamedTemporaryFile(dir=lib_path.parent)  # writable? (an unusable cache folder)
+        probe.close()
+    except OSError:  # a cache folder that cannot be used: build in a temporary folder of this process
+        lib_path = Path(tempfile.mkdtemp(prefix="fdi-sim-native-")) / lib_path.name
     if not lib_path.exists():
         cxx = next((c for c in (os.environ.get("CXX"), "c++", "g++", "clang++") if c and shutil.which(c)), None)
         if cxx is None:
             raise NativeUnavailable("no C++ compiler (c++, g++ or clang++; or $CXX) to build the exception shim")
-        lib_path.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(dir=lib_path.parent) as tmp:
             src = Path(tmp) / "shim.cpp"
             src.write_text(_SHIM_SOURCE)

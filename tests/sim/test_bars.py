@@ -113,6 +113,7 @@ def test_ctrl_c_ends_the_run_cleanly(tmp_path: Path, f16_text: str, monkeypatch:
         return step
 
     monkeypatch.setattr(Aircraft, "stepper", stepper_then_interrupt)
+    monkeypatch.setenv("FDI_SIM_CORE", "python")  # the Python loop steps through stepper (the compiled core: test_interrupts)
     res = fly(loads(f16_text), tmp_path, progress=False)
     assert res.status == "interrupted"
     log = read_log(res.log_path)  # a complete file (summary present), not one needing repair
