@@ -91,7 +91,7 @@ REGISTRY: tuple[SeedSet, ...] = (
             ("studies/f16_validation", "studies/dhc6_validation"),
             "fresh fault-free studies at the calibration studies' conditions: each checks its thresholds file once"),
     SeedSet("envelope-hold-out-1", "development", (15001, 15002),
-            ("fdi_sim/bank/turbulence.py", "fdi_sim/seeds.py"),
+            ("fdi_sim/bank/turbulence.py", "scenarios/studies/dhc6_envelope_hold_out.toml"),
             "the envelope hold-outs' first seeds, each flown once (2026-12-04): the F-16's with the schedule "
             "on the vertical accelerometer (24 alarms in 49.6 h, all in severe air: its severe runs then "
             "set the F-16's pitch-gyro schedule); the DHC-6's (2 alarms in 49.4 h; 3 severe-air runs "

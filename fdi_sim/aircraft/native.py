@@ -26,7 +26,7 @@ failed check gives its reason (:class:`NativeUnavailable`); the caller flies the
 A C++ exception thrown inside ``Run()`` would call ``std::terminate`` through a caller that is
 not C++: ``Run()`` is called through a three-line C++ shim compiled at first use
 (:func:`_shim`, needs a C++ compiler: ``c++``, ``g++`` or ``clang++``) that catches it and
-returns -1 with its message; the loop then raises :class:`JSBSimException` and the log ends whole.
+returns -1 with its message; the run then ends ``diverged`` with that message and the log ends whole.
 
 jsbsim's logger calls back into Python, so a loop calling these holds the GIL (numba's default).
 ``FDI_SIM_CORE=python`` forces the Python loop; ``FDI_SIM_CORE=compiled`` makes an unavailable
@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 
 from fdi_sim.errors import FdiSimError
 
-__all__ = ["FDM_OFFSETS", "NODE_OFFSET", "JSBSimException", "NativeBinding", "NativeUnavailable", "bind",
+__all__ = ["FDM_OFFSETS", "NODE_OFFSET", "NativeBinding", "NativeUnavailable", "bind",
            "core_mode"]
 
 #: mangled names (Itanium ABI) of the member functions the compiled loop calls
@@ -95,10 +95,6 @@ SET = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_size_t, ctypes.c_double)
 
 class NativeUnavailable(FdiSimError):
     """The compiled core cannot be used here; the message says which check failed."""
-
-
-class JSBSimException(FdiSimError):
-    """A C++ exception thrown inside JSBSim's ``Run()`` (caught by the shim)."""
 
 
 def core_mode() -> str:

@@ -73,7 +73,7 @@ HYPOTHESES: tuple[str, ...] = ("engine_0", "engine_1") + GAUGES
 #: crosses it in 0.27 % of samples, so a one-gauge fault is rarely called an engine)
 ISOLATION_Z = 3.0
 #: bumped when the kernel computes different numbers from the same design (in design_key)
-KERNEL_VERSION = "engine-gauges-kernel-1"  # the tail form is in design_key too
+KERNEL_VERSION = "engine-gauges-kernel-2"  # the tail form is in design_key too
 
 
 @dataclass(frozen=True)
@@ -149,8 +149,9 @@ def design_engine_gauges(aircraft: str, *, rate_hz: float = 20.0, average_s: flo
 # --- the kernel ------------------------------------------------------------------------------------------
 # int state: samples seen, ring position, then per gauge the warm-up count
 _S_K, _S_POS, _S_WARM = 0, 1, 2
-# float state per gauge g (3 gauges): offset sum, engine-0 sum, engine-1 sum
-_F_SUM, _F_BASE0, _F_BASE1 = 0, 3, 6
+# float state per gauge g (3 gauges): the warm-up sums of engine 0 and engine 1 (the offset b_g is
+# their means' difference)
+_F_BASE0, _F_BASE1 = 0, 3
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -168,7 +169,6 @@ def _kernel(y, ok, out_z, out_valid, out_hyp, out_r, thr, scales, n_avg, n_warm,
             ring_ok[pos, g] = good
             ring[pos, g] = a - b if good else 0.0  # an invalid value never enters arithmetic
             if good and ist[_S_WARM + g] < n_warm:
-                fs[_F_SUM + g] += a - b
                 fs[_F_BASE0 + g] += a
                 fs[_F_BASE1 + g] += b
                 ist[_S_WARM + g] += 1
@@ -188,7 +188,7 @@ def _kernel(y, ok, out_z, out_valid, out_hyp, out_r, thr, scales, n_avg, n_warm,
             for r in range(n_avg):  # oldest first: the same sum whatever the blocks
                 m += ring[(ist[_S_POS] + r) % n_avg, g]
             m = m / n_avg
-            z = (m - fs[_F_SUM + g] / n_warm) / (scales[g] / sq)
+            z = (m - (fs[_F_BASE0 + g] - fs[_F_BASE1 + g]) / n_warm) / (scales[g] / sq)
             out_r[j, g] = z
             if abs(z) > best:
                 best, arg = abs(z), g
@@ -256,7 +256,7 @@ class EngineGaugeStream:
         """No warm-up, an empty window."""
         n = self.design.n_avg
         self._ist = np.zeros(5, dtype=np.int64)
-        self._fs = np.zeros(9, dtype=np.float64)
+        self._fs = np.zeros(6, dtype=np.float64)
         self._ring = np.zeros((n, 3), dtype=np.float64)
         self._ring_ok = np.zeros((n, 3), dtype=np.bool_)
 
@@ -288,12 +288,11 @@ class EngineGaugeStream:
         out.threshold[:] = self.threshold
 
 
-def make_engine_gauges(model: Any = None, aircraft: str | None = None, turbulence: str | None = None,
-                       rate_hz: float | None = None, average_s: float = 0.2, warmup_s: float = 5.0,
-                       threshold: float = 6.0, suite: str = "default") -> EngineGaugeStream:
+def make_engine_gauges(model: Any = None, aircraft: str | None = None, rate_hz: float | None = None,
+                       average_s: float = 0.2, warmup_s: float = 5.0, threshold: float = 6.0,
+                       suite: str = "default") -> EngineGaugeStream:
     """The registered factory: ``aircraft`` (or ``model.meta["aircraft"]``) and the options of
-    :func:`design_engine_gauges` (``rate_hz`` [Hz] defaults to the model's, else 20). ``turbulence``
-    is accepted and unused (the gauges' differences do not see it)."""
+    :func:`design_engine_gauges` (``rate_hz`` [Hz] defaults to the model's, else 20)."""
     names = tuple(getattr(model, "output_names", ()) or ())
     if model is not None and not set(GAUGES) <= set(names):  # a linearizer's model: no engine gauges
         raise DesignError(f"{DETECTOR_ID} needs the measurements {', '.join(g for g in GAUGES if g not in names)}, "

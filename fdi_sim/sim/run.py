@@ -628,7 +628,7 @@ def check_log_path(out: Path, scenario_source: str, *, force: bool = False) -> N
 def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channels: tuple, progress: bool | None,
           inj: FaultInjector | None, fault_channels: tuple | None, stop: StopRequest, bank: FdiBank | None = None,
           per_step: bool = True, writer: FlightLogWriter | None = None,
-          native_core: tuple[object | None, str] | None = None):
+          native_core: tuple[object | None, str] = (None, "python")):
     """The per-step loop; returns (status, reason, time of the status [s], max deviations, steps,
     which core flew).
 
@@ -637,7 +637,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     allows it (``FDI_SIM_CORE``), with the same numbers as the Python loop below; otherwise, and
     for a faulty flight (the injector works on lists), the Python loop. ``writer`` (the log's, when
     it logs per step): the chunks end at its flush windows, so the log's bytes are the Python
-    loop's. ``native_core``: :func:`_native_core`'s answer, made in the set-up (else made here).
+    loop's. ``native_core``: :func:`_native_core`'s answer, made in the set-up.
 
     The truth, its divergence checks, the sensors, the pilot and the deviation statistics are one
     compiled call a step (:mod:`fdi_sim.sim._core`); a faulty flight measures and flies the pilot
@@ -711,7 +711,7 @@ def _loop(sc: Scenario, ac: Aircraft, sensors: SensorSuite, pilot: Pilot, channe
     corrected = False
     scale = None  # the bank's command rescale (elevator, aileron, rudder, throttle), once it sets one
     has_dropout = inj is not None and inj.has_dropout
-    nat, core_used = native_core if native_core is not None else _native_core(ac, inj)
+    nat, core_used = native_core
     try:
         if nat is not None:
             done = [0]  # steps complete, for the finally below when a divergence is raised
@@ -909,15 +909,13 @@ def _fly_chunks(nat, ac, truth_names, n_steps, dt, x_arr, y, u_arr, cmd_rows, ba
         if code == _chunk.END:
             return "completed", "", (k_now - 1) * dt
         if code == _chunk.BLOCK:  # the bank's block at step k_now (its sample stored); the step resumes after it
-            if bank.end_block(k_now, dt):
-                corrected, scale_t = bool(bank.corrections), bank.command_scale
-                for c in bank.corrections:
-                    corr[c.index] = c.fault_estimate
-                if scale_t is not None:
-                    has_scale, scale[:] = True, scale_t
-            elif bank.corrections:  # the estimates move every block
-                for c in bank.corrections:
-                    corr[c.index] = c.fault_estimate
+            bank.end_block(k_now, dt)
+            # the pilot's corrections and the command rescale, as the bank holds them after the block
+            corrected = bool(bank.corrections)
+            for c in bank.corrections:
+                corr[c.index] = c.fault_estimate
+            if bank.command_scale is not None:
+                has_scale, scale[:] = True, bank.command_scale
             continue
         if code == _core.REFILL:  # the sensors' noise block ran out: nothing of the step was done
             refill()

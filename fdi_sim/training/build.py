@@ -322,7 +322,7 @@ def _engine_gauge_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
     from fdi_sim.detectors.spec import build_detector, DetectorSpec
 
     sc = ctx.sc
-    params = {"aircraft": sc.aircraft, "rate_hz": float(sc.model.fdi.rate_hz),
+    params = {"aircraft": sc.aircraft, "rate_hz": float(sc.model.fdi.rate_hz), "suite": sc.model.sensors.suite,
               **{k: v for k, v in m.params.items() if k not in ENTRY_KEYS}}
     det = build_detector(DetectorSpec(m.id, params), None)
     return det, f"{m.id}: the two engines' gauges against each other"

@@ -7,6 +7,7 @@ their measurement and command rows are kept in memory (``fdi_sim.sim.run(..., ke
 """
 from __future__ import annotations
 
+import itertools
 import json
 import sys
 import tempfile
@@ -110,31 +111,21 @@ def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress
     departed: list[tuple[int, str]] = []
     pool = _seeds("training")
     given = [int(s) for s in seeds]
-    spares = iter(pool[pool.index(max(given)) + 1:] if given and set(given) <= set(pool) else ())
+    # spares: the training seeds after the given ones, only when the given ones are training seeds
+    spares = pool[pool.index(max(given)) + 1:] if given and set(given) <= set(pool) else ()
     allowed = int(MAX_DEPARTED_FRACTION * len(given))
-    queue = list(given)
     t0 = time.perf_counter()
     show = progress and sys.stderr.isatty()
     with tempfile.TemporaryDirectory(prefix="fdi-sim-train-") as tmp:
-        i = 0
-        while i < len(queue):
-            seed = queue[i]
-            i += 1
+        for seed in itertools.chain(given, spares):
+            if len(logs) == len(given) or len(departed) > allowed:
+                break
             res = run(fault_free(sc, seed, duration_s), tmp, progress=False, keep_rows=True)
             if res.status == "interrupted":  # Ctrl-C / SIGTERM during calibration: stop like any run
                 raise KeyboardInterrupt(f"calibration interrupted during training flight seed {seed}")
             Path(res.log_path).unlink(missing_ok=True)
             if res.status == "diverged":
                 departed.append((seed, res.summary.reason))
-                spare = next(spares, None)
-                if len(departed) > allowed or spare is None:
-                    which = "; ".join(f"seed {s}: {r}" for s, r in departed)
-                    raise DesignError(f"{sc.source}: {len(departed)} of {len(given) + len(departed) - 1} fault-free "
-                                      f"training flights departed (at most {allowed} of {len(given)} may be replaced"
-                                      f"{'' if spare is not None else ', and no spare seed is left'}): {which}; a "
-                                      "detector cannot be calibrated on a scenario that does not fly without its "
-                                      "faults")
-                queue.append(spare)
                 continue
             if res.status != "completed":
                 raise DesignError(f"{sc.source}: fault-free training flight seed {seed} ended {res.status} "
@@ -143,11 +134,16 @@ def fly_training(sc: Scenario, seeds: Sequence[int], duration_s: float, progress
             logs.append(res.rows)  # measurements and commands, kept in memory: no topic written or read back
             if show:
                 el = time.perf_counter() - t0
-                rate = len(logs) * duration_s / el
-                print(f"\r{label}calibration flights {len(logs)}/{len(given)}  {rate:.0f} sim s/s  "
-                      f"ETA {(len(given) - len(logs)) * el / max(1, i):.0f} s", end="", file=sys.stderr, flush=True)
+                print(f"\r{label}calibration flights {len(logs)}/{len(given)}  {len(logs) * duration_s / el:.0f} sim s/s"
+                      f"  ETA {(len(given) - len(logs)) * el / len(logs):.0f} s", end="", file=sys.stderr, flush=True)
     if show:
         print(file=sys.stderr)
+    if len(logs) < len(given):
+        which = "; ".join(f"seed {s}: {r}" for s, r in departed)
+        more = "" if len(departed) > allowed else ", and no spare seed is left"
+        raise DesignError(f"{sc.source}: {len(departed)} of {len(logs) + len(departed)} fault-free training flights "
+                          f"departed (at most {allowed} of {len(given)} may be replaced{more}): {which}; a detector "
+                          "cannot be calibrated on a scenario that does not fly without its faults")
     logs.departed = tuple(departed)
     return logs
 

@@ -172,3 +172,15 @@ def test_the_shim_turns_a_cpp_exception_into_a_message(tmp_path) -> None:
     assert shim(ctypes.cast(t.fine, ctypes.c_void_p).value, 0, msg.ctypes.data, len(msg)) == 1
     assert shim(ctypes.cast(t.thrower, ctypes.c_void_p).value, 0, msg.ctypes.data, len(msg)) == -1
     assert bytes(msg).split(b"\0")[0] == b"boom in Run"
+
+
+def test_the_set_up_loads_the_kernel_the_flight_calls(monkeypatch, tmp_path) -> None:
+    """``_chunk.prime`` (in the set-up) passes the argument types the flight passes: one compiled
+    signature, so numba's first call never lands inside a flight (a full log, and a study's log
+    with the bank)."""
+    import fdi_sim.sim._chunk as _chunk
+
+    monkeypatch.setenv("FDI_SIM_CORE", "auto")
+    assert _fly_short(tmp_path / "a").summary.core == "compiled"
+    assert fly(_variant("dhc6_cruise_doublets", per_step=False), tmp_path / "b", progress=False).summary.core == "compiled"
+    assert len(_chunk.run_chunk.signatures) == 1, _chunk.run_chunk.signatures
