@@ -142,13 +142,3 @@ def format_summary(s: dict[str, Any], o: Any) -> str:
                      f"{_fmt(d.get('p_detect'), '9.3f')} [{_fmt(pci[0], '.3f')}, {_fmt(pci[1], '.3f')}] "
                      f"{_fmt(d.get('delay_s_median'), '9.2f')} {_fmt(d.get('delay_s_p95'), '6.2f')}")
     return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> int:  # pragma: no cover - `python -m fdi_sim.study.cli`
-    from fdi_sim.cli import main as cli_main
-
-    return cli_main(["study", *(argv if argv is not None else sys.argv[1:])])
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
