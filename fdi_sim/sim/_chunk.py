@@ -37,7 +37,7 @@ S_K, S_PHASE, S_MODE, S_ROWS, S_NEXT = range(5)
 
 
 @numba.njit(cache=True)
-def run_chunk(state, k_end, n_steps, dt, run_shim, run_addr, fdm, msg_addr, msg_n, get, set_, read_nodes, n_truth,
+def run_chunk(state, k_end, n_steps, dt_s, run_shim, run_addr, fdm, msg_addr, msg_n, get, set_, read_nodes, n_truth,
               cmd_nodes, surf_nodes, x, y, yp, u_arr, cmd_rows, use_bank, n_fdi, K, S, meas_rows, corrected, corr,
               has_scale, scale, s_tab, s_off, p_state, p_par, aux, per_step, log_state, b_t, b_truth, b_meas, b_cmd,
               b_op, b_surf, flaps_deg, i_h, i_vc, i_mach, i_alpha):  # pragma: no cover (compiled)
@@ -50,7 +50,7 @@ def run_chunk(state, k_end, n_steps, dt, run_shim, run_addr, fdm, msg_addr, msg_
     n_flat = read_nodes.shape[0]
     code = LIMIT
     while k < k_end:
-        t_s = k * dt
+        t_s = k * dt_s
         u_row = cmd_rows[k % K] if use_bank else u_arr
         if phase == 0:
             for j in range(n_flat):

@@ -842,7 +842,7 @@ def _native_core(ac: Aircraft, inj: FaultInjector | None) -> tuple[object | None
         return None, f"python: {exc}"
 
 
-def _fly_chunks(nat, ac, truth_names, n_steps, dt, x_arr, y, u_arr, cmd_rows, bank, n_fdi, K, S, meas_rows, s_tab,
+def _fly_chunks(nat, ac, truth_names, n_steps, dt_s, x_arr, y, u_arr, cmd_rows, bank, n_fdi, K, S, meas_rows, s_tab,
                 s_off, p_state, p_par, aux, refill, per_step, log_state, channels, writer, flaps_deg, op_idx, stop,
                 bar, done, lim):
     """The fast path through the compiled chunk core (:mod:`fdi_sim.sim._chunk`); returns (status,
@@ -869,21 +869,21 @@ def _fly_chunks(nat, ac, truth_names, n_steps, dt, x_arr, y, u_arr, cmd_rows, ba
     corrected = has_scale = False
     msg_addr = nat.message.ctypes.data
     i_h, i_vc, i_mach, i_alpha = op_idx
-    period = writer.flush_period_s if writer is not None else 0.0
+    period_s = writer.flush_period_s if writer is not None else 0.0
     shown = 0
     while True:
         k = int(state[_chunk.S_K])
         if stop.requested and state[_chunk.S_PHASE] == 0:  # between two steps: every topic holds 0 .. k-1
-            return "interrupted", stop.reason, (k - 1) * dt if k else 0.0
+            return "interrupted", stop.reason, (k - 1) * dt_s if k else 0.0
         k_end = min(k + CH, n_steps + 1)
         if writer is not None:  # rows of one chunk within one flush window (the Python loop's chunks)
-            hi = writer.window_end_s
-            if k * dt >= hi:  # this chunk's first write flushes: the window it opens
-                hi = (math.floor(k * dt / period) + 1) * period
-            while k_end > k + 1 and (k_end - 1) * dt >= hi:
+            hi_s = writer.window_end_s
+            if k * dt_s >= hi_s:  # this chunk's first write flushes: the window it opens
+                hi_s = (math.floor(k * dt_s / period_s) + 1) * period_s
+            while k_end > k + 1 and (k_end - 1) * dt_s >= hi_s:
                 k_end -= 1
         state[_chunk.S_ROWS] = 0
-        code = _chunk.run_chunk(state, k_end, n_steps, dt, nat.run_shim, nat.run, nat.fdm, msg_addr,
+        code = _chunk.run_chunk(state, k_end, n_steps, dt_s, nat.run_shim, nat.run, nat.fdm, msg_addr,
                                 len(nat.message), nat.get, nat.set, rp, n_truth, cp, sp, x_arr, y, yp, u_arr, rows,
                                 use_bank, n_fdi, K, S, mrows, corrected, corr, has_scale, scale, s_tab, s_off,
                                 p_state, p_par, aux, per_step, log_state, bt, btruth, bmeas, bcmd, bop, bsurf,
@@ -902,14 +902,14 @@ def _fly_chunks(nat, ac, truth_names, n_steps, dt, x_arr, y, u_arr, cmd_rows, ba
                 if n_s:
                     ch_surf.write_rows(bt[:n_s], _combine(bsurf[:n_s], s_plan))
         if bar is not None and k_now - shown >= 120:
-            bar.update((k_now - shown) * dt)
+            bar.update((k_now - shown) * dt_s)
             shown = k_now
         if code == _chunk.LIMIT:
             continue
         if code == _chunk.END:
-            return "completed", "", (k_now - 1) * dt
+            return "completed", "", (k_now - 1) * dt_s
         if code == _chunk.BLOCK:  # the bank's block at step k_now (its sample stored); the step resumes after it
-            bank.end_block(k_now, dt)
+            bank.end_block(k_now, dt_s)
             # the pilot's corrections and the command rescale, as the bank holds them after the block
             corrected = bool(bank.corrections)
             for c in bank.corrections:
@@ -920,13 +920,13 @@ def _fly_chunks(nat, ac, truth_names, n_steps, dt, x_arr, y, u_arr, cmd_rows, ba
         if code == _core.REFILL:  # the sensors' noise block ran out: nothing of the step was done
             refill()
             continue
-        t_fail = (k_now - 1) * dt if code in (_chunk.STOPPED, _chunk.EXCEPTION) else k_now * dt
+        t_fail_s = (k_now - 1) * dt_s if code in (_chunk.STOPPED, _chunk.EXCEPTION) else k_now * dt_s
         if code == _chunk.STOPPED:
-            raise SimulationDiverged(t_fail, "JSBSim stopped the run")
+            raise SimulationDiverged(t_fail_s, "JSBSim stopped the run")
         if code == _chunk.EXCEPTION:
-            raise SimulationDiverged(t_fail, f"JSBSim threw a C++ exception in FGFDMExec::Run(): "
+            raise SimulationDiverged(t_fail_s, f"JSBSim threw a C++ exception in FGFDMExec::Run(): "
                                      f"{nat.exception_message()}")
-        raise SimulationDiverged(t_fail, _core.divergence_reason(code, x_arr[:n_truth].tolist(), truth_names, lim))
+        raise SimulationDiverged(t_fail_s, _core.divergence_reason(code, x_arr[:n_truth].tolist(), truth_names, lim))
 
 
 def _combine(flat: NDArray[np.float64], plan: Sequence[tuple[int, int, float | None]]) -> NDArray[np.float64]:
