@@ -190,7 +190,6 @@ RANKS: tuple[tuple[str, ...], ...] = (
 KNOWN_UPWARD: dict[tuple[str, str], str] = {
     ("linear", "review"): "linear/cli.py draws its pole map with review.linear_figures (the CLI belongs above)",
     ("study", "review"): "study/report.py renders with review.study_figures (the report belongs to review/)",
-    ("study", "cli"): "study/cli.py hands a run back to fdi_sim.cli.main (fdi-sim study ... --run N)",
 }
 
 
