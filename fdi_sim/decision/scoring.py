@@ -168,13 +168,19 @@ def _in_windows(t: float, windows: Sequence[tuple[float, float]], grace_s: float
 
 
 def exposure_s(truth: CaseTruth, grace_s: float = LATE_GRACE_S) -> float:
-    """Armed fault-free time of a case [s] (module docstring)."""
-    lo, hi = truth.arm_s, truth.t_end_s
-    total = max(0.0, hi - lo)
-    for w0, w1 in truth.windows_s:
-        a, b = max(w0, lo), min(min(w1, hi) + grace_s, hi)
-        total -= max(0.0, b - a)
-    return max(total, 0.0)
+    """Armed fault-free time of a case [s]: ``[arm_s, t_end_s]`` minus the union of the windows
+    ``[w0, min(w1, t_end_s) + grace_s]`` (an intermittent fault's windows overlap once extended)."""
+    t0, t1 = truth.arm_s, truth.t_end_s
+    if t1 <= t0:
+        return 0.0
+    spans = sorted((max(t0, a), min(t1, min(b, t1) + grace_s)) for a, b in truth.windows_s)
+    covered, end = 0.0, t0
+    for a, b in spans:  # union length of the clipped spans, swept left to right
+        a = max(a, end)
+        if b > a:
+            covered += b - a
+            end = b
+    return (t1 - t0) - covered
 
 
 def sample_grid(truth: CaseTruth, out: CaseOutput, grace_s: float = LATE_GRACE_S,

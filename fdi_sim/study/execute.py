@@ -169,16 +169,16 @@ def commit_run(out_dir: Path, index: int, record: dict[str, Any], log: bytes | N
     _write_atomic(runs / f"{name}.json", json.dumps(record, indent=1, sort_keys=True).encode())
 
 
-def check_disk(study: Study, out_dir: Path, remaining: int) -> None:
+def check_disk(study: Study, out_dir: Path, remaining: int, remaining_h: float) -> None:
     """Refuse, before flying, a study whose logs would not fit on the disk."""
     o = study.model.output
     per_h = (FULL_LOG_BYTES_PER_H if o.full_logs else STATISTICS_BYTES_PER_H if o.statistics else 0.0)
-    need = remaining * study.model.duration_s / S_PER_H * per_h * DISK_MARGIN
+    need = remaining_h * per_h * DISK_MARGIN
     free = shutil.disk_usage(out_dir).free
     if need > free:
         what = "full 120 Hz logs" if o.full_logs else "statistics logs"
         raise StudyError(study.source, "output.full_logs" if o.full_logs else "output.statistics",
-                         f"{remaining} runs x {study.model.duration_s:g} s of {what} need about {need / 1e9:.1f} GB "
+                         f"{remaining} runs ({remaining_h:.1f} flight h) of {what} need about {need / 1e9:.1f} GB "
                          f"and {out_dir} has {free / 1e9:.1f} GB free",
                          "set output.full_logs = false (statistics only, ~50 x smaller), fly fewer runs, or give "
                          "--out on a larger disk")
@@ -367,10 +367,12 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
     from distributed import as_completed
 
     out = open_results(study, out_dir)
-    total = study.n_runs
-    done = done_runs(out)
-    todo = [i for i in range(total) if i not in done]
-    check_disk(study, out, len(todo))
+    indices = study.run_indices()
+    total = len(indices)
+    done = done_runs(out) & set(indices)
+    todo = [i for i in indices if i not in done]
+    todo_h = sum(study.run_duration_s(i) for i in todo) / S_PER_H
+    check_disk(study, out, len(todo), todo_h)
     t0 = time.perf_counter()
     if not todo:
         return StudyOutcome(out, total, len(done), 0, 0, False, 0.0, 0.0)
@@ -390,7 +392,7 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
     flown = lost = 0
     hours = 0.0
     interrupted = False
-    bar = _bar(len(todo) * study.model.duration_s / S_PER_H, progress, study.name)
+    bar = _bar(todo_h, progress, study.name)
     futures: list[Any] = []
     try:
         design_futs = {}
@@ -432,7 +434,7 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
             hours += rec.get("flight_h", 0.0)
             alarms += len(rec.get("false_alarms", []))
             if bar is not None:
-                bar.update(study.model.duration_s / S_PER_H)
+                bar.update(study.run_duration_s(rec["index"]) / S_PER_H)
                 bar.set_postfix_str(f"{flown}/{len(todo)} runs, {alarms} false alarms, "
                                     f"{hours * S_PER_H / max(time.perf_counter() - t0, 1e-9):.0f} sim s/s")
     except KeyboardInterrupt:

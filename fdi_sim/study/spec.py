@@ -125,6 +125,14 @@ class Study:
         m = self.model
         return int(m.runs) if m.runs is not None else int(math.ceil(m.flight_h * S_PER_H / m.duration_s - 1e-9))
 
+    def run_indices(self) -> tuple[int, ...]:
+        """The runs this study flies (all of them; a benchmark flies a selection)."""
+        return tuple(range(self.n_runs))
+
+    def run_duration_s(self, index: int) -> float:
+        """Simulated time of run ``index`` [s]."""
+        return float(self.model.duration_s)
+
     def with_overrides(self, *, runs: int | None = None, duration_s: float | None = None) -> "Study":
         """The study with the command line's ``--runs`` / ``--duration``."""
         d = self.model.model_dump()

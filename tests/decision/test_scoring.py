@@ -144,3 +144,12 @@ def test_detectability_per_size_and_a_missing_case():
     assert d["0"]["detected"]["k"] == 0 and d["1"]["detected"]["k"] == 1
     with pytest.raises(KeyError, match="no output"):
         score_suite(truths, {"s0": outs["s0"]})
+
+
+def test_exposure_takes_the_union_of_overlapping_windows():
+    from fdi_sim.decision.scoring import exposure_s
+
+    tr = CaseTruth("i", "DHC6", "g", "test", "sensor-stuck-v1", "alpha_rad", "", 0,
+                   ((30.0, 31.0), (32.0, 33.0), (60.0, 61.0)), 5.0, 100.0)
+    # [30, 33] + 2 s grace -> [30, 35]; [60, 63]: 5 + 3 = 8 s covered of 95
+    assert exposure_s(tr) == pytest.approx(87.0)

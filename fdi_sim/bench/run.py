@@ -1,0 +1,277 @@
+"""``fdi-sim bench run``: fly (or reuse) a suite's cases with a bank, then score every member and the bank.
+
+A benchmark run is a study whose runs are the suite's cases (:class:`SuiteStudy`), flown by
+:func:`fdi_sim.study.execute.fly_study` on Dask into one results folder: a run is done when its record
+is there, so an interrupted run resumes without flying a case twice, and a later call with more
+cases (``--split``, ``--group``, ``--per-group``) adds only the missing ones. The folder's identity
+is the suite's hash and the bank (:meth:`SuiteStudy.identity`): another bank needs another folder.
+
+What flies. ``--bank default``: the aircraft's default bank in the loop, with reconfiguration,
+designed per schedule-grid node at moderate turbulence (the envelope studies' design: the bank is
+not told the case's air). ``--detector ID ...``: those registered (or plugin) detectors side by
+side, thresholds trained at the same design points, reconfiguration off, so that each member sees
+the same flight as it would alone and is scored as its own method.
+
+Scoring (:mod:`fdi_sim.decision.scoring`): per member, its ``/fdi/<id>/statistic`` topic: the alarm,
+the score ``statistic / threshold`` (so that scores of differently scheduled thresholds rank on
+one scale; NaN where not valid) and the isolation; the bank: the OR of the members' alarms, the
+largest member score, the isolation of the first member alarming. Only completed cases are
+scored; the others are listed with their status.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from fdi_sim.bench.suite import Case, Suite
+from fdi_sim.decision.scoring import CaseOutput, CaseTruth, score_suite
+from fdi_sim.errors import BenchError
+from fdi_sim.study.spec import Study, StudyModel
+
+BANK = "bank"
+#: the default bank's design: per schedule-grid node at nominal conditions, moderate turbulence
+DESIGN = {"point": "grid", "turbulence": "moderate", "wind_speed_kts": 0.0, "noise_scale": 1.0}
+#: wall-clock limit of one case [s] (a per-sample Python detector on a 600 s flight needs minutes)
+TIME_LIMIT_S = 3600.0
+
+
+@dataclass(frozen=True)
+class BenchBank:
+    """What flies in the loop: the default bank, or detectors side by side.
+
+    Attributes
+    ----------
+    name : str
+        ``default`` or ``detectors:<id>+<id>``.
+    fdi : dict
+        The cases' ``[fdi]`` section.
+    detectors : tuple of dict
+        Their ``[[detectors]]`` entries.
+    """
+
+    name: str
+    fdi: Mapping[str, Any]
+    detectors: tuple[Mapping[str, Any], ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "fdi": dict(self.fdi), "detectors": [dict(d) for d in self.detectors]}
+
+
+def bench_bank(default: bool = True, detector_ids: Sequence[str] = ()) -> BenchBank:
+    """The bank of ``--bank default`` or of ``--detector ID ...`` (ids checked, "did you mean").
+
+    Raises
+    ------
+    BenchError
+        An unknown detector id, or both or neither given.
+    """
+    from fdi_sim import registry
+    from fdi_sim.errors import RegistryError
+
+    if bool(default) == bool(detector_ids):
+        raise BenchError("fdi-sim bench run", "--bank / --detector", "give the default bank or detectors, not both",
+                         "--bank default, or --detector ID (repeatable; `fdi-sim plugins` lists them)")
+    if default:
+        return BenchBank("default", {"bank": "default", "far_per_h": 0.1, "design": dict(DESIGN)})
+    ids = list(dict.fromkeys(detector_ids))
+    for i in ids:
+        try:
+            registry.get("detector", i)
+        except RegistryError as exc:
+            raise BenchError("fdi-sim bench run", "--detector", str(exc).strip("'\""),
+                             "give a registered detector id (`fdi-sim plugins`)") from None
+    fdi = {"bank": "none", "far_per_h": 0.1, "thresholds": "trained", "reconfigure": False,
+           "on_design_failure": "skip", "design": dict(DESIGN)}
+    return BenchBank("detectors:" + "+".join(ids), fdi, tuple({"type": i} for i in ids))
+
+
+@dataclass(frozen=True)
+class SuiteStudy(Study):
+    """A suite's cases as the runs of a study (the executor flies :meth:`run_indices`)."""
+
+    suite: Suite | None = None
+    bank: BenchBank | None = None
+    selected: tuple[int, ...] = field(default=())
+
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+    @property
+    def n_runs(self) -> int:
+        return len(self._suite.cases)
+
+    @property
+    def _suite(self) -> Suite:
+        assert self.suite is not None and self.bank is not None
+        return self.suite
+
+    def run_indices(self) -> tuple[int, ...]:
+        return self.selected
+
+    def run_duration_s(self, index: int) -> float:
+        return self._suite.cases[index].duration_s
+
+    def identity(self) -> str:
+        """The suite's hash, the bank and the code version: a folder holds the cases of one of each."""
+        from fdi_sim import __version__
+
+        blob = json.dumps({"suite": self._suite.hash, "bank": self.bank.to_dict() if self.bank else None,
+                           "version": __version__}, sort_keys=True)
+        return hashlib.sha256(blob.encode()).hexdigest()[:20]
+
+    def run_scenario(self, index: int) -> tuple[Any, dict[str, Any]]:
+        from fdi_sim.scenario.loader import from_dict
+
+        case = self._suite.cases[index]
+        data = json.loads(case.scenario_json)
+        assert self.bank is not None
+        data["fdi"] = {**self.bank.fdi, "log_residuals": False}
+        data["detectors"] = [dict(d) for d in self.bank.detectors]
+        sc = from_dict(data, source=f"{self._suite.source} case {case.case}")
+        return sc, {"case": case.case, **json.loads(case.params)}
+
+
+def suite_study(suite: Suite, bank: BenchBank, cases: Sequence[Case]) -> SuiteStudy:
+    """The study that flies ``cases`` of ``suite`` with ``bank``."""
+    if not cases:
+        raise BenchError(suite.source, "--split / --group", "the selection holds no case",
+                         "widen it (`fdi-sim bench run --list` shows the groups and splits)")
+    model = StudyModel(kind="study", name=f"{suite.name}.{bank.name.replace(':', '-').replace('+', '.')}"[:100],
+                       description=f"{suite.name} flown with {bank.name}", scenario="(suite)", seed=suite.model.seed,
+                       runs=len(suite.cases), duration_s=max(c.duration_s for c in suite.cases),
+                       time_limit_s=TIME_LIMIT_S, bank=dict(bank.fdi))
+    probe = SuiteStudy(model, suite.source, None, suite, bank, tuple(c.index for c in cases))  # type: ignore[arg-type]
+    base, _ = probe.run_scenario(cases[0].index)
+    return SuiteStudy(model, suite.source, base, suite, bank, tuple(c.index for c in cases))
+
+
+# --- scoring a results folder ---------------------------------------------------------------------
+def case_truth(case: Case, record: Mapping[str, Any]) -> CaseTruth:
+    """A flown case's label: the injector's windows (clipped to the flight's end), arming and end."""
+    t_end = float(record["t_end_s"])
+    windows = tuple((float(a), min(float(b), t_end)) for f in record.get("faults", []) for a, b in f.get("windows_s", [])
+                    if float(a) <= t_end)
+    return CaseTruth(case.case, case.aircraft, case.group, case.split, case.fault_type, case.target, case.size,
+                     case.size_rank, tuple(sorted(windows)), float(record.get("arm_s") or 0.0), t_end, case.negative)
+
+
+def case_outputs(log_path: Path) -> dict[str, CaseOutput]:
+    """Per member id, and :data:`BANK`, the method's output on one flown case (module docstring)."""
+    from fdi_sim.flightlog import read_log
+
+    log = read_log(log_path)
+    try:
+        members = {m["id"]: m for m in json.loads(log.metadata.get("fdi", {}).get("members", "[]"))}
+    except (TypeError, ValueError):
+        members = {}
+    out: dict[str, CaseOutput] = {}
+    alarms, scores, isos = [], [], []
+    t_ref = None
+    for topic, data in log.topics.items():
+        parts = topic.split("/")
+        if not (len(parts) == 4 and parts[1] == "fdi" and parts[3] == "statistic"):
+            continue
+        ident = parts[2]
+        t = np.asarray(data.t_s, dtype=float)
+        alarm = np.asarray(data["alarm"]) > 0.5
+        valid = np.asarray(data["valid"]) > 0.5
+        with np.errstate(divide="ignore", invalid="ignore"):
+            score = np.where(valid, np.asarray(data["statistic"], float) / np.asarray(data["threshold"], float), np.nan)
+        hyps = members.get(ident, {}).get("hypotheses", [])
+        k = np.asarray(data["isolation"]).astype(np.int64)
+        iso = [hyps[j] if a and 0 <= j < len(hyps) else None for j, a in zip(k, alarm)]
+        out[ident] = CaseOutput(t, alarm, score, iso)
+        if t_ref is None or np.array_equal(t, t_ref):
+            t_ref = t
+            alarms.append(alarm)
+            scores.append(score)
+            isos.append(iso)
+    if alarms and t_ref is not None:
+        a = np.any(alarms, axis=0)
+        with np.errstate(invalid="ignore"):
+            s = np.nanmax(np.where(np.isnan(scores), -np.inf, scores), axis=0)
+        s = np.where(np.isfinite(s), s, np.nan)
+        iso_bank = [next((m[j] for m in isos if m[j] is not None), None) for j in range(len(t_ref))]
+        out[BANK] = CaseOutput(t_ref, a, s, iso_bank)
+    return out
+
+
+@dataclass(frozen=True)
+class BenchResult:
+    """A scored benchmark run.
+
+    Attributes
+    ----------
+    suite, suite_hash, bank : str
+    cases : int
+        Cases asked for.
+    scored : dict
+        Split (``all`` and each split present) -> method (member id or ``bank``) -> the scorer's dict.
+    not_completed : list of dict
+        Cases that did not complete (case, status, reason).
+    flight_h : float
+        Flight hours of the scored cases [h].
+    """
+
+    suite: str
+    suite_hash: str
+    bank: str
+    cases: int
+    scored: dict[str, dict[str, dict[str, Any]]]
+    not_completed: list[dict[str, Any]]
+    flight_h: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"suite": self.suite, "suite_hash": self.suite_hash, "bank": self.bank, "cases": self.cases,
+                "flight_h": self.flight_h, "not_completed": self.not_completed, "scored": self.scored}
+
+
+def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
+    """Score the selected cases found in a results folder (every member and the bank, per split).
+
+    Raises
+    ------
+    BenchError
+        A selected case not flown yet (run ``bench run`` again), or a completed case without its log.
+    """
+    from fdi_sim.study.execute import load_records
+
+    suite = study._suite
+    out = Path(out_dir)
+    recs = {int(r["index"]): r for r in load_records(out)}
+    missing = [suite.cases[i].case for i in study.selected if i not in recs]
+    if missing:
+        raise BenchError(str(out), "", f"{len(missing)} selected case(s) are not flown yet (first {missing[:3]})",
+                         "run the same `fdi-sim bench run` again: it flies only those")
+    truths: list[CaseTruth] = []
+    outputs: dict[str, dict[str, CaseOutput]] = {}
+    bad = []
+    for i in study.selected:
+        r, case = recs[i], suite.cases[i]
+        if r.get("status") != "completed":
+            bad.append({"case": case.case, "status": r.get("status"), "reason": r.get("reason", "")})
+            continue
+        if not r.get("log"):
+            raise BenchError(str(out / "runs" / f"{i:06d}.json"), "log", "a completed case without its statistics log",
+                             "delete the record and run `fdi-sim bench run` again")
+        truths.append(case_truth(case, r))
+        for ident, o in case_outputs(out / "runs" / r["log"]).items():
+            outputs.setdefault(ident, {})[case.case] = o
+    scored: dict[str, dict[str, dict[str, Any]]] = {}
+    splits = ["all"] + [s for s in ("train", "validation", "test") if any(t.split == s for t in truths)]
+    for sp in splits:
+        ts = [t for t in truths if sp == "all" or t.split == sp]
+        scored[sp] = {}
+        for ident, outs in outputs.items():
+            mine = [t for t in ts if t.case in outs]  # a member skipped at a design point has no output there
+            if mine:
+                scored[sp][ident] = score_suite(mine, outs) | {"cases_scored": len(mine), "cases_without": len(ts) - len(mine)}
+    assert study.bank is not None
+    return BenchResult(suite.name, suite.hash, study.bank.name, len(study.selected), scored, bad,
+                       sum(t.t_end_s for t in truths) / 3600.0)
