@@ -220,6 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
     from fdi_sim.study import cli as study_cli  # light: imports Dask when run
 
     study_cli.add_parser(sub)
+    from fdi_sim.bench import cli as bench_cli  # light: imports Dask and pyarrow when run
+
+    bench_cli.add_parser(sub)
     return p
 
 

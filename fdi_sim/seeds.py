@@ -6,7 +6,10 @@ A method is judged on flights it was not tuned on. Four roles keep that honest:
   shaped a decision: it is development now, and says what it shaped);
 - ``calibration``: thresholds and filters are fitted on it;
 - ``validation``: a fresh seed that checks a calibration once it is made (never fitted on);
-- ``hold-out``: looked at once to report a bar, never tuned on.
+- ``hold-out``: looked at once to report a bar, never tuned on;
+- ``benchmark``: a frozen benchmark suite (``fdi_sim/bench``): every method is reported on it, as
+  often as the leaderboard is made, and none of fdi-sim's own is tuned on it (its ``train`` split
+  is for learners outside fdi-sim).
 
 Training flights (:func:`fdi_sim.training.flights.training_seeds`) are calibration flights of
 the trained thresholds. A study's seed is its master seed: run ``i`` flies
@@ -24,7 +27,7 @@ from dataclasses import dataclass
 
 __all__ = ["REGISTRY", "SeedSet", "role_of", "seed_set", "seeds"]
 
-ROLES = ("development", "calibration", "validation", "hold-out", "synthetic")
+ROLES = ("development", "calibration", "validation", "hold-out", "benchmark", "synthetic")
 
 
 @dataclass(frozen=True)
@@ -119,6 +122,9 @@ REGISTRY: tuple[SeedSet, ...] = (
             "the small DHC-6 calibration study of the thresholds-file tests (mechanics, not a verdict)"),
     SeedSet("test-validation", "validation", (24,), ("tests/study/test_calibration.py",),
             "the small fresh study that validates that file in the same tests (mechanics, not a verdict)"),
+    SeedSet("fdi-bench", "benchmark", (16001,), ("bench/fdi-bench-v1",),
+            "the frozen benchmark suite fdi-bench-v1 (issue 27; its cases' seeds are SeedSequence([16001, g, s, r])): "
+            "reported on by every method, tuned on by none"),
     SeedSet("tail-coverage", "synthetic", (20261204,), ("docs/make_tail_coverage.py",),
             "synthetic AR(1) statistics of the tail method's coverage table"),
 )

@@ -184,6 +184,7 @@ RANKS: tuple[tuple[str, ...], ...] = (
     ("offline",),
     ("study", "papers"),
     ("review",),
+    ("bench",),
     ("cli",),
 )
 #: arrows against the flow that are known and not yet removed: (from package, to package) -> why

@@ -100,3 +100,13 @@ def test_the_scan_sees_a_typed_seed(tmp_path):
         assert len(_seed_constants(p)) == 2
     finally:
         p.unlink()
+
+
+def test_every_shipped_suite_draws_its_seed_from_the_registry():
+    from fdi_sim.bench.suite import SUITES_DIR, suite_names
+    import tomllib
+
+    for name in suite_names():
+        seed = tomllib.loads((SUITES_DIR / f"{name}.toml").read_text())["seed"]
+        s = role_of(seed)
+        assert s is not None and s.role == "benchmark" and f"bench/{name}" in s.used_by, (name, seed, s)

@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -149,6 +150,18 @@ def suite_study(suite: Suite, bank: BenchBank, cases: Sequence[Case]) -> SuiteSt
     probe = SuiteStudy(model, suite.source, None, suite, bank, tuple(c.index for c in cases))  # type: ignore[arg-type]
     base, _ = probe.run_scenario(cases[0].index)
     return SuiteStudy(model, suite.source, base, suite, bank, tuple(c.index for c in cases))
+
+
+def fly_bench(study: SuiteStudy, out_dir: str | Path, **kwargs: Any) -> Any:
+    """Fly the selected cases not yet in ``out_dir`` (:func:`fdi_sim.study.execute.fly_study`'s keywords),
+    then write the suite's labels beside them (:data:`fdi_sim.bench.export.CASES_FILE`): the folder
+    is then an exportable benchmark folder however the flight ended."""
+    from fdi_sim.bench.export import write_cases_file
+    from fdi_sim.study.execute import fly_study
+
+    o = fly_study(study, out_dir, **kwargs)
+    write_cases_file(Path(out_dir), study._suite)
+    return o
 
 
 # --- scoring a results folder ---------------------------------------------------------------------

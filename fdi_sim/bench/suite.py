@@ -239,7 +239,7 @@ def load_suite(ref: str = "fdi-bench-v1", *, check_frozen: bool = True) -> Suite
     if check_frozen and path.parent == SUITES_DIR and frozen is not None and frozen and suite.hash != frozen:
         raise BenchError(str(path), "", f"its cases hash to {suite.hash[:16]}..., not to the frozen {frozen[:16]}... of "
                          f"{model.name}: a suite version never changes (a scenario default, a fault model or the file "
-                         "moved under it)", f"restore what changed, or ship the new cases as a new version "
+                         "moved under it)", "restore what changed, or ship the new cases as a new version "
                          "(a new file and a new FROZEN entry in fdi_sim/bench/suite.py)")
     return suite
 
@@ -247,7 +247,12 @@ def load_suite(ref: str = "fdi-bench-v1", *, check_frozen: bool = True) -> Suite
 def _build_cases(model: SuiteModel, path: Path) -> tuple[Case, ...]:
     from fdi_sim.scenario import load
     from fdi_sim.scenario.loader import from_dict
-    from fdi_sim.study.spec import _set_dotted, check_distribution, draw, resolve_scenario
+    from fdi_sim.study.spec import (
+        _set_dotted,
+        check_distribution,
+        draw,
+        resolve_scenario,
+    )
 
     src = str(path)
     bases: dict[str, dict[str, Any]] = {}
@@ -286,8 +291,8 @@ def _build_cases(model: SuiteModel, path: Path) -> tuple[Case, ...]:
         levels: list[tuple[int, float | None]] = list(enumerate(g.size.values)) if g.size else [(0, None)]
         for si, value in levels:
             order = np.random.default_rng(np.random.SeedSequence([model.seed, gi, si, SPLIT_STREAM])).permutation(g.runs)
-            n_train = int(round(SPLIT_FRACTIONS[0] * g.runs))
-            n_val = int(round(SPLIT_FRACTIONS[1] * g.runs))
+            n_train = round(SPLIT_FRACTIONS[0] * g.runs)
+            n_val = round(SPLIT_FRACTIONS[1] * g.runs)
             split_of = {int(r): SPLITS[0] if k < n_train else SPLITS[1] if k < n_train + n_val else SPLITS[2]
                         for k, r in enumerate(order)}
             for r in range(g.runs):

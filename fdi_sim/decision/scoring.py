@@ -52,8 +52,9 @@ applies it.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -126,7 +127,7 @@ class CaseTruth:
                 "negative": self.negative}
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "CaseTruth":
+    def from_dict(cls, d: Mapping[str, Any]) -> CaseTruth:
         return cls(str(d["case"]), str(d["aircraft"]), str(d["group"]), str(d["split"]), str(d["fault_type"]),
                    str(d["target"]), str(d["size"]), int(d["size_rank"]),
                    tuple((float(a), float(b)) for a, b in d["windows_s"]), float(d["arm_s"]), float(d["t_end_s"]),
@@ -187,7 +188,7 @@ def sample_grid(truth: CaseTruth, out: CaseOutput, grace_s: float = LATE_GRACE_S
                 grid_hz: float = GRID_HZ) -> tuple[NDArray[np.int8], NDArray[np.bool_], NDArray[np.float64]]:
     """The case on the uniform grid: labels (1 fault, 0 fault-free, -1 left out), held alarms, held
     scores (-inf before the first sample and where NaN)."""
-    n = int(math.floor((truth.t_end_s - truth.arm_s) * grid_hz + 1e-9)) + 1
+    n = math.floor((truth.t_end_s - truth.arm_s) * grid_hz + 1e-9) + 1
     g = truth.arm_s + np.arange(max(n, 0)) / grid_hz
     label = np.zeros(g.size, dtype=np.int8)
     for w0, w1 in truth.windows_s:
@@ -348,7 +349,8 @@ def score_suite(truths: Sequence[CaseTruth], outputs: Mapping[str, CaseOutput], 
     dict
         JSON-serializable: ``cases``, ``flight_h``, ``exposure_h``, ``false_alarms``, ``far_per_h``
         (+ ``_ci``), ``detection`` (all faults), ``by_class``, ``by_type``, ``detectability`` (type ->
-        size rank -> detection), ``confusion``, ``alfa``, ``per_flight_detection``, ``event``
+        size rank -> detection), ``confusion``, ``alfa``, ``alfa_by_class`` (each class's fault flights
+        with every fault-free one), ``per_flight_detection``, ``event``
         (precision, recall, F1 and counts), ``sample`` (point-wise precision, recall, F1; AUROC,
         AUPRC; ``None`` without scores or with one class).
 
@@ -388,6 +390,9 @@ def score_suite(truths: Sequence[CaseTruth], outputs: Mapping[str, CaseOutput], 
         row[col] = row.get(col, 0) + 1
     out["confusion"] = confusion
     out["alfa"] = _alfa(cs, alfa_window_s, confidence)
+    clean = [c for c in cs if not c.truth.windows_s]  # ALFA per fault class: its fault flights and every fault-free one
+    out["alfa_by_class"] = {k: _alfa([c for c in faulty if c.truth.fault_class == k] + clean, alfa_window_s, confidence)
+                            for k in out["by_class"]}
     out["per_flight_detection"] = _prop(sum(1 for c in faulty if c.detected_s is not None and not c.early),
                                         len(faulty), confidence)
     rec = sum(1 for c in faulty if c.recalled)

@@ -1,0 +1,124 @@
+"""The leaderboard: one row per scored method of benchmark results folders, in Markdown and HTML.
+
+Ranked by the ALFA criterion's F1 (detected within 5 s of the onset, no alarm before it; see
+:mod:`fdi_sim.decision.scoring`), then by the event-level F1. Beside each row: whether it beats the ALFA
+dataset's best-known published detector, Keipour, Mousaei & Scherer's recursive least squares
+(2019; precision 88.23 %, recall 88.23 %, mean detection time 2.02 s on 47 real flights), on the
+ALFA criterion as a whole and per fault class. The two are not the same flights: ALFA's are a
+fixed-wing UAV's real engine and surface failures, ours simulated; the column says which of our
+methods reach that bar here, not that they would there.
+"""
+from __future__ import annotations
+
+import html
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fdi_sim.errors import BenchError
+
+#: Keipour, Mousaei & Scherer (2019), RLS on ALFA: precision, recall, mean detection time [s]
+ALFA_RLS = {"precision": 0.8823, "recall": 0.8823, "mean_detection_time_s": 2.02}
+
+
+@dataclass(frozen=True)
+class Row:
+    method: str
+    bank: str
+    suite: str
+    suite_hash: str
+    split: str
+    scores: dict[str, Any]
+
+    @property
+    def beats_alfa(self) -> bool:
+        a = self.scores["alfa"]
+        return _beats(a)
+
+    @property
+    def beats_alfa_classes(self) -> list[str]:
+        return [k for k, a in self.scores.get("alfa_by_class", {}).items() if _beats(a)]
+
+
+def _beats(a: dict[str, Any]) -> bool:
+    p, r = a.get("precision"), a.get("recall")
+    return p is not None and r is not None and p > ALFA_RLS["precision"] and r > ALFA_RLS["recall"]
+
+
+def leaderboard_rows(folders: Sequence[Path], split: str = "all") -> list[Row]:
+    """Every method scored in ``folders`` (their ``bench.json``), ranked.
+
+    Raises
+    ------
+    BenchError
+        A folder without results, results of two suites, or a split not scored.
+    """
+    rows: list[Row] = []
+    hashes = set()
+    for f in folders:
+        p = f / "bench.json"
+        try:
+            d = json.loads(p.read_text())
+        except (OSError, ValueError) as exc:
+            raise BenchError(str(f), "", f"no readable bench.json ({exc})", "run `fdi-sim bench run --out` into it") from None
+        hashes.add(d["suite_hash"])
+        if split not in d["scored"]:
+            raise BenchError(str(p), "--split", f"split {split!r} was not scored (have {sorted(d['scored'])})",
+                             "give a scored split")
+        for m, s in d["scored"][split].items():
+            name = ("default bank" if m == "bank" else m) if d["bank"] == "default" else m
+            rows.append(Row(name if d["bank"] != "default" or m == "bank" else f"{m} (in the default bank)",
+                            d["bank"], d["suite"], d["suite_hash"], split, s))
+    if len(hashes) > 1:
+        raise BenchError(", ".join(map(str, folders)), "", f"results of {len(hashes)} different suites",
+                         "rank the results of one suite version")
+
+    def key(r: Row) -> tuple[float, float]:
+        return (-(r.scores["alfa"].get("f1") or 0.0), -(r.scores["event"].get("f1") or 0.0))
+
+    return sorted(rows, key=key)
+
+
+def _f(x: Any, spec: str) -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def _ci(p: dict[str, Any]) -> str:
+    return "-" if p.get("p") is None else f"{p['p']:.2f} [{p['ci'][0]:.2f}, {p['ci'][1]:.2f}]"
+
+
+HEADER = ("method", "cases", "false alarms per h [95 %]", "P(detect) [95 %]", "delay median / p95 [s]",
+          "isolation right", "ALFA precision / recall", "ALFA mean t [s]", "event F1", "AUROC", "AUPRC",
+          "beats ALFA's RLS")
+
+
+def _cells(r: Row) -> list[str]:
+    s = r.scores
+    d, a = s["detection"], s["alfa"]
+    far = "-" if s["far_per_h"] is None else f"{s['far_per_h']:.3f} [{s['far_per_h_ci'][0]:.3f}, {s['far_per_h_ci'][1]:.3f}]"
+    beats = ("yes" if r.beats_alfa else "no") + (f" ({', '.join(r.beats_alfa_classes)})" if r.beats_alfa_classes else "")
+    return [r.method, str(s["cases"]), far, _ci(d["detected"]),
+            f"{_f(d['delay_s_median'], '.2f')} / {_f(d['delay_s_p95'], '.2f')}", _ci(d["isolation"]),
+            f"{_f(a['precision'], '.2f')} / {_f(a['recall'], '.2f')}", _f(a["mean_detection_time_s"], ".2f"),
+            _f(s["event"]["f1"], ".2f"), _f(s["sample"]["auroc"], ".3f"), _f(s["sample"]["auprc"], ".3f"), beats]
+
+
+def leaderboard_markdown(rows: Sequence[Row]) -> str:
+    """The table (Markdown)."""
+    out = ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
+    out += ["| " + " | ".join(_cells(r)) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def leaderboard_html(rows: Sequence[Row]) -> str:
+    """The table as a self-contained HTML page."""
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in HEADER)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in _cells(r)) + "</tr>" for r in rows)
+    suite = f"{rows[0].suite} ({rows[0].suite_hash[:12]}), split {rows[0].split}" if rows else ""
+    return ("<!doctype html><html><head><meta charset='utf-8'><title>fdi-bench leaderboard</title><style>"
+            "body{font-family:sans-serif}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
+            "text-align:right}td:first-child{text-align:left}</style></head><body>"
+            f"<h1>fdi-bench leaderboard</h1><p>{html.escape(suite)}</p><table><tr>{head}</tr>{body}</table>"
+            "</body></html>\n")

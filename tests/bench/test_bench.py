@@ -1,0 +1,237 @@
+"""fdi-bench: the frozen suite and its hash, benchmark runs flown for real (JSBSim on a local Dask
+cluster, MCAP logs read back), resume, 1 worker = 2 workers, the export read by pyarrow, external
+scores, and bad input."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from fdi_sim.bench import suite as suite_mod
+from fdi_sim.bench.export import HASH_KEY, read_truths, scores_file_for
+from fdi_sim.bench.run import (
+    BANK,
+    bench_bank,
+    case_outputs,
+    fly_bench,
+    score_folder,
+    suite_study,
+)
+from fdi_sim.bench.suite import FROZEN, SPLITS, load_suite, resolve_suite
+from fdi_sim.cli import main
+from fdi_sim.errors import BenchError
+from fdi_sim.study.execute import TIMING_KEYS, load_records
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def suite():
+    return load_suite()
+
+
+def test_the_suite_hash_is_the_frozen_one_and_does_not_follow_the_hash_seed(suite):
+    assert suite.hash == FROZEN["fdi-bench-v1"]
+    code = "from fdi_sim.bench.suite import load_suite; print(load_suite(check_frozen=False).hash)"
+    for seed in ("0", "4242"):
+        env = {**os.environ, "PYTHONHASHSEED": seed}
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+        assert out.stdout.strip() == suite.hash, seed
+
+
+def test_a_changed_suite_is_refused_and_an_unknown_one_gets_a_did_you_mean(monkeypatch):
+    monkeypatch.setitem(suite_mod.FROZEN, "fdi-bench-v1", "0" * 64)
+    with pytest.raises(BenchError, match="a suite version never changes"):
+        load_suite("fdi-bench-v1")
+    with pytest.raises(BenchError, match="did you mean fdi-bench-v1"):
+        resolve_suite("fdi-bench-v2")
+
+
+def test_the_suite_covers_what_the_issue_asks(suite):
+    by_ac = Counter((c.aircraft, c.fault_type.split("-")[0] if c.fault_type else "none") for c in suite.cases)
+    for ac in ("f16", "DHC6"):
+        for kind in ("sensor", "actuator", "engine", "icing"):
+            assert by_ac[(ac, kind)] >= 10, (ac, kind)
+        ff_h = sum(c.duration_s for c in suite.cases if c.aircraft == ac and not c.fault_type and not c.negative) / 3600
+        assert ff_h >= 50.0, (ac, ff_h)
+    phases = {c.phase for c in suite.cases}
+    assert {"f16-cruise", "f16-climb", "f16-descent", "f16-turn", "dhc6-approach"} <= phases
+    sized = [g for g in suite.model.groups if g.size is not None]
+    assert all(len(g.size.values) >= 3 for g in sized)
+    assert {c.negative for c in suite.cases} >= {"steep turns", "3-2-1-1 inputs", "severe air"}
+
+
+def test_splits_hold_whole_flights_60_20_20_per_group_and_size(suite):
+    ids = [c.case for c in suite.cases]
+    assert len(ids) == len(set(ids))
+    per = Counter((c.group, c.size_rank, c.split) for c in suite.cases)
+    for g in suite.model.groups:
+        for r in ({-1} if g.size is None and g.fault is None else {0} if g.size is None else set(range(len(g.size.values)))):
+            n = [per[(g.name, r, s)] for s in SPLITS]
+            assert sum(n) == g.runs and n[0] == round(0.6 * g.runs) and n[1] == round(0.2 * g.runs), (g.name, r, n)
+    assert {c.split for c in suite.cases} == set(SPLITS)
+
+
+# --- flown for real -------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def flown(suite, tmp_path_factory):
+    """A cruise-phase selection (no training flight: the atlas holds its designs): the flameout first,
+    then the selection grown by the three gyro-bias sizes on two workers; the same four on one."""
+    tmp = tmp_path_factory.mktemp("bench")
+    bank = bench_bank(True)
+    first = suite.select(groups=("f16-engine-flameout",), per_group=1)
+    both = suite.select(groups=("f16-engine-flameout", "f16-gyro-bias"), per_group=1)
+    o1 = fly_bench(suite_study(suite, bank, first), tmp / "two", workers=2, progress=False)
+    rec0 = tmp / "two" / "runs" / f"{first[0].index:06d}.json"
+    mtime = rec0.stat().st_mtime_ns
+    st = suite_study(suite, bank, both)
+    o2 = fly_bench(st, tmp / "two", workers=2, progress=False)
+    o3 = fly_bench(st, tmp / "two", workers=2, progress=False)
+    o4 = fly_bench(st, tmp / "one", workers=1, progress=False)
+    return {"tmp": tmp, "study": st, "outcomes": (o1, o2, o3, o4), "mtime": (rec0, mtime), "cases": both}
+
+
+def test_a_bench_run_grows_and_resumes_without_flying_a_case_twice(flown):
+    o1, o2, o3, _ = flown["outcomes"]
+    assert (o1.flown, o2.done_before, o2.flown, o3.flown) == (1, 1, 3, 0)
+    rec0, mtime = flown["mtime"]
+    assert rec0.stat().st_mtime_ns == mtime  # the first case was not flown again
+
+
+def test_one_worker_gives_the_records_of_two(flown):
+    a = load_records(flown["tmp"] / "two")
+    b = load_records(flown["tmp"] / "one")
+    assert [r["index"] for r in a] == [r["index"] for r in b] and len(a) == 4
+    for ra, rb in zip(a, b):
+        assert {k: v for k, v in ra.items() if k not in TIMING_KEYS} == {k: v for k, v in rb.items() if k not in TIMING_KEYS}
+
+
+def test_scores_come_from_the_logs_and_match_the_records(flown):
+    res = score_folder(flown["study"], flown["tmp"] / "two")
+    assert res.not_completed == [] and res.cases == 4
+    s = res.scored["all"]
+    recs = load_records(flown["tmp"] / "two")
+    # the bank's detections by the scorer equal the run records' (earliest member detection per fault)
+    hit = sum(any(d["detected_t_s"] is not None for d in r["detections"]) for r in recs)
+    assert s[BANK]["detection"]["detected"]["k"] == hit
+    from fdi_sim.study.stats import summarize
+
+    summ = summarize(recs)["bank"]  # the study statistics' definitions, from the records alone
+    assert s[BANK]["false_alarms"] == summ["false_alarms"]
+    assert s[BANK]["exposure_h"] == pytest.approx(summ["exposure_h"], rel=1e-12)
+    assert s[BANK]["detection"]["delay_s_median"] == pytest.approx(summ["delay_s_median"])
+    for ident in recs[0]["detectors"]:
+        assert s[ident]["cases"] == 4
+        k = sum(any(d["detector"] == ident and d["detected_t_s"] is not None for d in r["detections"]) for r in recs)
+        assert s[ident]["detection"]["detected"]["k"] == k, ident
+
+
+@pytest.fixture(scope="module")
+def exported(flown):
+    out = flown["tmp"] / "export"
+    assert main(["export", str(flown["tmp"] / "two"), "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_the_export_is_parquet_read_by_pyarrow_with_labels_and_splits(flown, exported):
+    cases = pq.read_table(exported / "cases.parquet").to_pylist()
+    assert len(cases) == 4 and all(c["faulty"] for c in cases)
+    assert {c["split"] for c in cases} <= set(SPLITS)
+    ev = pq.read_table(exported / "events.parquet").to_pylist()
+    assert {e["case"] for e in ev} == {c["case"] for c in cases}
+    grid = pq.read_table(exported / "grid.parquet")
+    lab = np.asarray(grid.column("label"))
+    assert set(np.unique(lab)) <= {-1, 0, 1} and (lab == 1).any() and (lab == 0).any()
+    topics = sorted(p.name for p in (exported / "topics").glob("*.parquet"))
+    assert "fdi.kalman-gust-v1.statistic.parquet" in topics
+    t = pq.read_table(exported / "topics" / "fdi.kalman-gust-v1.statistic.parquet")
+    assert {"case", "t_s", "statistic", "alarm"} <= set(t.column_names)
+    meta = json.loads((exported / "suite.json").read_text())
+    assert meta["suite_hash"] == FROZEN["fdi-bench-v1"]
+
+
+def test_external_scores_of_the_banks_own_outputs_give_the_banks_numbers(flown, exported, tmp_path, capsys):
+    """The round trip a learned detector takes: outputs on the export's log clock, scored by `bench score`."""
+    recs = load_records(flown["tmp"] / "two")
+    meta, _truths = read_truths(exported)
+    by_case = {c.index: c.case for c in flown["cases"]}
+    outs = {by_case[r["index"]]: case_outputs(flown["tmp"] / "two" / "runs" / r["log"])[BANK] for r in recs}
+    f = scores_file_for(outs, tmp_path / "scores.parquet", meta["suite_hash"])
+    assert main(["bench", "score", "--scores", str(f), "--export", str(exported), "--split", "all", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)["scores"]
+    want = score_folder(flown["study"], flown["tmp"] / "two").scored["all"][BANK]
+    for k in ("false_alarms", "detection", "alfa", "event", "sample", "far_per_h"):
+        if k == "detection":  # isolation: the file carries no hypotheses
+            assert got[k]["detected"] == want[k]["detected"] and got[k]["delay_s_median"] == want[k]["delay_s_median"]
+        else:
+            assert got[k] == want[k], k
+
+
+def _scores(tmp: Path, rows: dict, meta_hash: str | None) -> Path:
+    t = pa.table(rows)
+    if meta_hash is not None:
+        t = t.replace_schema_metadata({HASH_KEY: meta_hash.encode()})
+    p = tmp / "s.parquet"
+    pq.write_table(t, p)
+    return p
+
+
+@pytest.mark.parametrize("what, match", [
+    ("other-suite", "not this export's"), ("no-hash", "does not say which suite"), ("missing", "are missing"),
+    ("duplicate", "duplicate timestamps"), ("outside", "outside its flight"), ("no-alarm", "scores without alarms"),
+    ("unknown", "not in the export")])
+def test_a_bad_scores_file_is_refused_with_the_fix(exported, tmp_path, capsys, what, match):
+    meta, truths = read_truths(exported)
+    names = [t.case for t in truths]
+    t = np.arange(0.0, 10.0, 0.5)
+    case = [n for n in names for _ in t]
+    tt = np.tile(t, len(names))
+    rows = {"case": case, "t_s": tt, "score": np.zeros(tt.size), "alarm": np.zeros(tt.size, np.int8)}
+    h: str | None = meta["suite_hash"]
+    if what == "other-suite":
+        h = "f" * 64
+    elif what == "no-hash":
+        h = None
+    elif what == "missing":
+        keep = [c != names[0] for c in case]
+        rows = {k: np.asarray(v, dtype=object if k == "case" else None)[keep] for k, v in rows.items()}
+        rows["case"] = list(rows["case"])
+    elif what == "duplicate":
+        rows["t_s"] = np.where(tt == 0.5, 0.0, tt)
+    elif what == "outside":
+        rows["t_s"] = tt + 1000.0
+    elif what == "no-alarm":
+        rows.pop("alarm")
+    elif what == "unknown":
+        rows["case"] = ["nobody/000"] * t.size + case[t.size:]
+    f = _scores(tmp_path, rows, h)
+    assert main(["bench", "score", "--scores", str(f), "--export", str(exported), "--split", "all"]) == 2
+    err = capsys.readouterr().err
+    assert match in err and "Fix:" in err, err
+
+
+def test_an_export_folder_that_cannot_be_written_is_refused(flown, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert main(["export", str(flown["tmp"] / "two"), "--out", str(blocker / "sub"), "--quiet"]) == 2
+    assert "cannot be written" in capsys.readouterr().err
+
+
+def test_the_leaderboard_ranks_every_scored_method(flown, tmp_path, capsys):
+    # bench.json is what `bench run` writes: made here by the CLI on the flown folder (nothing left to fly)
+    assert main(["bench", "run", "--group", "f16-engine-flameout", "--group", "f16-gyro-bias", "--per-group", "1",
+                 "--out", str(flown["tmp"] / "two"), "--workers", "1", "--quiet"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "lb.md"
+    assert main(["bench", "leaderboard", str(flown["tmp"] / "two"), "--out", str(out)]) == 0
+    md = out.read_text()
+    assert "default bank" in md and "kalman-gust-v1 (in the default bank)" in md and "beats ALFA" in md
+    assert out.with_suffix(".html").read_text().startswith("<!doctype html>")
