@@ -154,11 +154,3 @@ class ReviewError(FdiSimError, ValueError):
 
     def __reduce__(self) -> tuple:
         return (ReviewError, (self.source, self.problem, self.fix))
-
-
-class BenchError(ScenarioError):
-    """A benchmark suite, its results folder, a scores file or an export folder is unusable.
-
-    Same fields as :class:`ScenarioError`: ``source`` is the file or folder, ``key`` the suite key
-    or the option (``--scores``), with the fix.
-    """

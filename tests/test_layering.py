@@ -175,7 +175,7 @@ def test_no_module_level_import_cycles() -> None:
 RANKS: tuple[tuple[str, ...], ...] = (
     ("units", "errors", "signals", "threads", "data", "isa", "operating_point", "registry", "contracts", "seeds",
      "stamp"),
-    ("flightlog", "aircraft", "sensors", "pilot", "decision"),
+    ("flightlog", "aircraft", "sensors", "pilot", "decision", "scoring"),
     ("faults", "linear", "scenario"),
     ("detectors",),
     ("bank",),

@@ -116,7 +116,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_score(args: argparse.Namespace) -> int:
     from fdi_sim.bench.export import read_scores, read_truths
-    from fdi_sim.decision.scoring import score_suite
+    from fdi_sim.scoring import score_suite
 
     meta, truths = read_truths(args.export)
     if args.split != "all":

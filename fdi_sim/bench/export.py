@@ -11,7 +11,7 @@ Export (reads a benchmark results folder's logs and labels only; flies nothing):
     OUT/topics/<topic>.parquet
                             each vector topic of the logs on the log clock: case, t_s, its fields
                             (``/fdi/kalman-gust-v1/statistic`` -> ``fdi.kalman-gust-v1.statistic.parquet``)
-    OUT/grid.parquet        every case on the scorer's uniform grid (fdi_sim.decision.scoring.GRID_HZ)
+    OUT/grid.parquet        every case on the scorer's uniform grid (fdi_sim.scoring.GRID_HZ)
                             from 0 to t_end_s: case, split, t_s, label (1 fault, 0 fault-free, -1 the
                             grace after a window: left out by the scorer), then every topic field held
                             from its latest sample (``<topic>.<field>``, NaN before the first)
@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from fdi_sim.decision.scoring import GRID_HZ, CaseOutput, CaseTruth
-from fdi_sim.errors import BenchError
+from fdi_sim.bench.errors import BenchError
+from fdi_sim.scoring import GRID_HZ, CaseOutput, CaseTruth
 
 SCHEMA_VERSION = 1
 #: written by ``bench run`` beside the runs: the suite's labels of every case in the folder
@@ -97,8 +97,8 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
     import pyarrow.parquet as pq
 
     from fdi_sim.bench.run import case_truth
-    from fdi_sim.decision.scoring import sample_grid
     from fdi_sim.flightlog import VectorTopic, read_log
+    from fdi_sim.scoring import sample_grid
     from fdi_sim.study.execute import load_records
 
     src = Path(results_dir)

@@ -1,7 +1,7 @@
 """The leaderboard: one row per scored method of benchmark results folders, in Markdown and HTML.
 
 Ranked by the ALFA criterion's F1 (detected within 5 s of the onset, no alarm before it; see
-:mod:`fdi_sim.decision.scoring`), then by the event-level F1. Beside each row: whether it beats the ALFA
+:mod:`fdi_sim.scoring`), then by the event-level F1. Beside each row: whether it beats the ALFA
 dataset's best-known published detector, Keipour, Mousaei & Scherer's recursive least squares
 (2019; precision 88.23 %, recall 88.23 %, mean detection time 2.02 s on 47 real flights), on the
 ALFA criterion as a whole and per fault class. The two are not the same flights: ALFA's are a
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fdi_sim.errors import BenchError
+from fdi_sim.bench.errors import BenchError
 
 #: Keipour, Mousaei & Scherer (2019), RLS on ALFA: precision, recall, mean detection time [s]
 ALFA_RLS = {"precision": 0.8823, "recall": 0.8823, "mean_detection_time_s": 2.02}

@@ -12,7 +12,7 @@ not told the case's air). ``--detector ID ...``: those registered (or plugin) de
 side, thresholds trained at the same design points, reconfiguration off, so that each member sees
 the same flight as it would alone and is scored as its own method.
 
-Scoring (:mod:`fdi_sim.decision.scoring`): per member, its ``/fdi/<id>/statistic`` topic: the alarm,
+Scoring (:mod:`fdi_sim.scoring`): per member, its ``/fdi/<id>/statistic`` topic: the alarm,
 the score ``statistic / threshold`` (so that scores of differently scheduled thresholds rank on
 one scale; NaN where not valid) and the isolation; the bank: the OR of the members' alarms, the
 largest member score, the isolation of the first member alarming. Only completed cases are
@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
+from fdi_sim.bench.errors import BenchError
 from fdi_sim.bench.suite import Case, Suite
-from fdi_sim.decision.scoring import CaseOutput, CaseTruth, score_suite
-from fdi_sim.errors import BenchError
+from fdi_sim.scoring import CaseOutput, CaseTruth, score_suite
 from fdi_sim.study.spec import Study, StudyModel
 
 BANK = "bank"

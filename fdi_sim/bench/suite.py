@@ -37,7 +37,8 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fdi_sim.errors import BenchError, ScenarioError
+from fdi_sim.bench.errors import BenchError
+from fdi_sim.errors import ScenarioError
 
 #: the shipped suites' folder
 SUITES_DIR = Path(__file__).resolve().parents[1] / "_bench"

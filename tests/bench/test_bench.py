@@ -16,6 +16,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from fdi_sim.bench import suite as suite_mod
+from fdi_sim.bench.errors import BenchError
 from fdi_sim.bench.export import HASH_KEY, read_truths, scores_file_for
 from fdi_sim.bench.run import (
     BANK,
@@ -27,7 +28,6 @@ from fdi_sim.bench.run import (
 )
 from fdi_sim.bench.suite import FROZEN, SPLITS, load_suite, resolve_suite
 from fdi_sim.cli import main
-from fdi_sim.errors import BenchError
 from fdi_sim.study.execute import TIMING_KEYS, load_records
 
 ROOT = Path(__file__).resolve().parents[2]

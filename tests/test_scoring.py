@@ -1,11 +1,11 @@
-"""The benchmark's scorer (fdi_sim.decision.scoring) on hand-made alarm sequences with known answers,
+"""The benchmark's scorer (fdi_sim.scoring) on hand-made alarm sequences with known answers,
 including the point-adjustment trap."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fdi_sim.decision.scoring import (
+from fdi_sim.scoring import (
     CaseOutput,
     CaseTruth,
     point_adjust,
@@ -147,7 +147,7 @@ def test_detectability_per_size_and_a_missing_case():
 
 
 def test_exposure_takes_the_union_of_overlapping_windows():
-    from fdi_sim.decision.scoring import exposure_s
+    from fdi_sim.scoring import exposure_s
 
     tr = CaseTruth("i", "DHC6", "g", "test", "sensor-stuck-v1", "alpha_rad", "", 0,
                    ((30.0, 31.0), (32.0, 33.0), (60.0, 61.0)), 5.0, 100.0)

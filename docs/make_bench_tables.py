@@ -1,0 +1,157 @@
+"""docs/bench.md's generated blocks: the suite (``bench-suite``), the leaderboard (``leaderboard``)
+and what the benchmark costs on this machine (``bench-cost``).
+
+The leaderboard flies (or reuses) each bank on its selection of fdi-bench-v1 with ``fdi-sim bench
+run``'s code, into ``--out-root/<digest>/<bank>``: ``<digest>`` is the digest of the code the
+flights depend on (:data:`FLIGHT`), so a changed detector never reuses an old folder, and the
+same code resumes an interrupted regeneration without flying a case twice.
+
+    python docs/make_bench_tables.py --out-root DIR [--workers 2] [--suite-only]
+
+Banks and selections (:data:`BANKS`): the two default banks (one per aircraft, the ``default`` bank
+flies each case's own) on the whole suite; every registered detector side by side on a selection
+(the per-sample Python members make them about two orders slower than the default bank's kernels:
+the cost block gives the measured rates), with the selection in the table's caption.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from fdi_sim.stamp import inputs_digest, make_stamp, replace_block
+
+MD = ROOT / "docs" / "bench.md"
+COMMAND = "python docs/make_bench_tables.py --out-root DIR --workers 2"
+SUITE_INPUTS = ("fdi_sim/_bench", "fdi_sim/bench/suite.py", "docs/make_bench_tables.py")
+CODE = ("aircraft", "scenarios", "fdi_sim/_bench", "fdi_sim/bench", "fdi_sim/decision", "fdi_sim/bank",
+        "fdi_sim/detectors", "fdi_sim/training", "fdi_sim/sensors", "fdi_sim/faults", "fdi_sim/sim", "fdi_sim/pilot",
+        "fdi_sim/linear", "fdi_sim/scenario", "fdi_sim/study/execute.py", "fdi_sim/study/spec.py",
+        "docs/make_bench_tables.py")
+#: what the flights depend on (the folders are keyed by its digest): CODE without the scoring and rendering
+FLIGHT = tuple(x for x in CODE if x not in ("fdi_sim/bench", "fdi_sim/decision", "docs/make_bench_tables.py")) + (
+    "fdi_sim/bench/run.py", "fdi_sim/bench/suite.py") + tuple(
+    f"fdi_sim/decision/{p.name}" for p in sorted((ROOT / "fdi_sim" / "decision").glob("*.py")) if p.name != "scoring.py")
+#: (bank name, selection keywords of Suite.select, what the caption says)
+BANKS: tuple[tuple[str, dict, str], ...] = (
+    ("default", {}, "the whole suite"),
+    ("every-detector", {"split": "test", "per_group": 1},
+     "the test split, one case per group and size (every registered detector side by side, reconfiguration off)"),
+)
+
+
+def _suite_table() -> str:
+    from fdi_sim.bench.suite import SPLITS, load_suite
+
+    s = load_suite()
+    lines = [f"`{s.name}`, hash `{s.hash}`: {len(s.cases)} cases, {s.flight_h():.1f} planned flight hours.", "",
+             "| group | aircraft | phases | cases | flight h | " + " | ".join(SPLITS) + " | fault (sizes) or label |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for g in s.model.groups:
+        cs = [c for c in s.cases if c.group == g.name]
+        f = g.fault or {}
+        tgt = f.get("target")
+        tgt = ", ".join(tgt["choice"]) if isinstance(tgt, dict) and "choice" in tgt else tgt
+        what = (f"{f['type']} on {tgt}" + (f" ({g.size.key} {', '.join(f'{v:g}' for v in g.size.values)})"
+                                           if g.size else "")) if f else (f"hard negative: {g.negative}" if g.negative
+                                                                          else "fault-free")
+        lines.append(f"| {g.name} | {cs[0].aircraft} | {len(g.phases)} | {len(cs)} | {s.flight_h(tuple(cs)):.1f} | "
+                     + " | ".join(str(sum(c.split == x for c in cs)) for x in SPLITS) + f" | {what} |")
+    return "\n".join(lines)
+
+
+def _fly(out_root: Path, workers: int) -> dict[str, dict]:
+    from fdi_sim import registry
+    from fdi_sim.bench.run import bench_bank, fly_bench, score_folder, suite_study
+    from fdi_sim.bench.suite import load_suite
+
+    suite = load_suite()
+    digest = inputs_digest(FLIGHT)[:12]
+    out: dict[str, dict] = {}
+    for name, sel, caption in BANKS:
+        bank = bench_bank(True) if name == "default" else bench_bank(False, registry.ids("detector"))
+        cases = suite.select(**sel)
+        st = suite_study(suite, bank, cases)
+        folder = out_root / digest / name
+        print(f"{name}: {len(cases)} cases, {suite.flight_h(cases):.1f} flight h -> {folder}", flush=True)
+        t0 = time.perf_counter()
+        o = fly_bench(st, folder, workers=workers, progress=True)
+        if o.interrupted or not o.complete:
+            raise SystemExit(f"{name}: {o.done_before + o.flown} of {o.total} cases flown; run again to go on")
+        res = score_folder(st, folder)
+        recs = [json.loads(p.read_text()) for p in sorted((folder / "runs").glob("[0-9]*.json"))]
+        recs = [r for r in recs if r["index"] in set(st.selected)]
+        out[name] = {"result": res.to_dict(), "caption": caption, "folder": str(folder),
+                     "wall_s_sum": sum(float(r.get("wall_s", 0.0)) for r in recs),
+                     "flight_h": sum(float(r.get("flight_h", 0.0)) for r in recs),
+                     "this_call": {"flown": o.flown, "wall_s": time.perf_counter() - t0, "flight_h": o.flight_h}}
+    return out
+
+
+def _leaderboard(flown: dict[str, dict]) -> str:
+    from fdi_sim.bench.leaderboard import ALFA_RLS, Row, leaderboard_markdown
+
+    parts = []
+    for name, d in flown.items():
+        r = d["result"]
+        rows = []
+        for m, s in r["scored"]["all"].items():
+            label = ("default bank" if m == "bank" else f"{m} (in the default bank)") if name == "default" else \
+                ("all detectors (OR)" if m == "bank" else m)
+            rows.append(Row(label, r["bank"], r["suite"], r["suite_hash"], "all", s))
+        rows.sort(key=lambda x: (-(x.scores["alfa"].get("f1") or 0.0), -(x.scores["event"].get("f1") or 0.0)))
+        nc = r["not_completed"]
+        parts += [f"**{'Default banks' if name == 'default' else 'Every registered detector'}**, {d['caption']}: "
+                  f"{r['cases']} cases, {r['flight_h']:.1f} flight h scored"
+                  + (f"; {len(nc)} not completed ({', '.join(sorted({x['status'] for x in nc}))}: "
+                     f"{', '.join(x['case'] for x in nc[:4])}{'...' if len(nc) > 4 else ''})" if nc else "") + ".", "",
+                  leaderboard_markdown(rows), ""]
+    parts.append(f"ALFA's RLS (Keipour et al. 2019): precision {ALFA_RLS['precision']:.2%}, recall "
+                 f"{ALFA_RLS['recall']:.2%}, mean detection time {ALFA_RLS['mean_detection_time_s']:g} s. \"beats\": "
+                 "both the precision and the recall above it on the ALFA criterion here, in brackets the fault classes "
+                 "where that holds (each class's fault flights with every fault-free one).")
+    return "\n".join(parts)
+
+
+def _cost(flown: dict[str, dict], workers: int) -> str:
+    lines = ["| bank | cases | flight h | summed run wall time [s] | flight h per worker-hour | this call: wall [s], flight h per hour |",
+             "|---|---|---|---|---|---|"]
+    for name, d in flown.items():
+        c = d["this_call"]
+        rate = d["flight_h"] / (d["wall_s_sum"] / 3600.0) if d["wall_s_sum"] > 0 else None
+        call = (f"{c['wall_s']:.0f}, {c['flight_h'] / (c['wall_s'] / 3600.0):.0f} ({c['flown']} cases flown)"
+                if c["flown"] else "nothing flown (reused)")
+        lines.append(f"| {name} | {d['result']['cases']} | {d['flight_h']:.1f} | {d['wall_s_sum']:.0f} | "
+                     f"{'-' if rate is None else f'{rate:.0f}'} | {call} |")
+    lines += ["", (f"{workers} worker(s) on this machine (2 cores); the summed run wall time excludes the designs "
+              "(training flights are cached per design and counted in no run).")]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    a.add_argument("--out-root", type=Path, default=None, help="where the benchmark folders are kept (reused)")
+    a.add_argument("--workers", type=int, default=2)
+    a.add_argument("--suite-only", action="store_true", help="only the suite table (flies nothing)")
+    args = a.parse_args(argv)
+    text = MD.read_text()
+    text = replace_block(text, make_stamp("bench-suite", "python docs/make_bench_tables.py --suite-only", SUITE_INPUTS),
+                         _suite_table())
+    if not args.suite_only:
+        if args.out_root is None:
+            raise SystemExit("give --out-root DIR (the benchmark folders, reused when the code is the same)")
+        flown = _fly(args.out_root, args.workers)
+        text = replace_block(text, make_stamp("leaderboard", COMMAND, CODE), _leaderboard(flown))
+        text = replace_block(text, make_stamp("bench-cost", COMMAND, CODE), _cost(flown, args.workers))
+    MD.write_text(text)
+    print(f"wrote {MD}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
