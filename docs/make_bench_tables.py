@@ -33,8 +33,10 @@ CODE = ("aircraft", "scenarios", "fdi_sim/_bench", "fdi_sim/bench", "fdi_sim/dec
         "fdi_sim/detectors", "fdi_sim/training", "fdi_sim/sensors", "fdi_sim/faults", "fdi_sim/sim", "fdi_sim/pilot",
         "fdi_sim/linear", "fdi_sim/scenario", "fdi_sim/study/execute.py", "fdi_sim/study/spec.py",
         "docs/make_bench_tables.py")
-#: what the flights depend on (the folders are keyed by its digest): CODE without the scoring and rendering
-FLIGHT = tuple(x for x in CODE if x not in ("fdi_sim/bench", "fdi_sim/decision", "docs/make_bench_tables.py")) + (
+#: what the flights depend on (the folders are keyed by its digest): CODE without the scoring, the rendering
+#: and the study executor (whose records are checked by tests/study and tests/bench: resume, 1 worker = 2)
+FLIGHT = tuple(x for x in CODE if x not in ("fdi_sim/bench", "fdi_sim/decision", "fdi_sim/study/execute.py",
+                                            "fdi_sim/study/spec.py", "docs/make_bench_tables.py")) + (
     "fdi_sim/bench/run.py", "fdi_sim/bench/suite.py") + tuple(
     f"fdi_sim/decision/{p.name}" for p in sorted((ROOT / "fdi_sim" / "decision").glob("*.py")) if p.name != "scoring.py")
 #: (bank name, selection keywords of Suite.select, what the caption says)
@@ -67,7 +69,8 @@ def _suite_table() -> str:
 
 def _fly(out_root: Path, workers: int) -> dict[str, dict]:
     from fdi_sim import registry
-    from fdi_sim.bench.run import bench_bank, fly_bench, score_folder, suite_study
+    from fdi_sim.bench.run import bench_bank, fly_bench, suite_study
+    from fdi_sim.bench.score import score_folder
     from fdi_sim.bench.suite import load_suite
 
     suite = load_suite()

@@ -79,7 +79,8 @@ def _out_dir(args: argparse.Namespace, suite: Any, bank: Any) -> Path:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from fdi_sim.bench.run import bench_bank, fly_bench, score_folder, suite_study
+    from fdi_sim.bench.run import bench_bank, fly_bench, suite_study
+    from fdi_sim.bench.score import score_folder
     from fdi_sim.bench.suite import load_suite
     from fdi_sim.study.execute import _write_atomic
 

@@ -96,7 +96,7 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from fdi_sim.bench.run import case_truth
+    from fdi_sim.bench.score import case_truth
     from fdi_sim.flightlog import VectorTopic, read_log
     from fdi_sim.scoring import sample_grid
     from fdi_sim.study.execute import load_records

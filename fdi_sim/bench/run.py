@@ -12,11 +12,7 @@ not told the case's air). ``--detector ID ...``: those registered (or plugin) de
 side, thresholds trained at the same design points, reconfiguration off, so that each member sees
 the same flight as it would alone and is scored as its own method.
 
-Scoring (:mod:`fdi_sim.scoring`): per member, its ``/fdi/<id>/statistic`` topic: the alarm,
-the score ``statistic / threshold`` (so that scores of differently scheduled thresholds rank on
-one scale; NaN where not valid) and the isolation; the bank: the OR of the members' alarms, the
-largest member score, the isolation of the first member alarming. Only completed cases are
-scored; the others are listed with their status.
+Scoring the folder: :mod:`fdi_sim.bench.score` (this module is what the flights depend on).
 """
 from __future__ import annotations
 
@@ -27,14 +23,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from fdi_sim.bench.errors import BenchError
 from fdi_sim.bench.suite import Case, Suite
-from fdi_sim.scoring import CaseOutput, CaseTruth, score_suite
 from fdi_sim.study.spec import Study, StudyModel
 
-BANK = "bank"
 #: the default bank's design: per schedule-grid node at nominal conditions, moderate turbulence
 DESIGN = {"point": "grid", "turbulence": "moderate", "wind_speed_kts": 0.0, "noise_scale": 1.0}
 #: wall-clock limit of one case [s] (a per-sample Python detector on a 600 s flight needs minutes)
@@ -162,129 +154,3 @@ def fly_bench(study: SuiteStudy, out_dir: str | Path, **kwargs: Any) -> Any:
     o = fly_study(study, out_dir, **kwargs)
     write_cases_file(Path(out_dir), study._suite)
     return o
-
-
-# --- scoring a results folder ---------------------------------------------------------------------
-def case_truth(case: Case, record: Mapping[str, Any]) -> CaseTruth:
-    """A flown case's label: the injector's windows (clipped to the flight's end), arming and end."""
-    t_end = float(record["t_end_s"])
-    windows = tuple((float(a), min(float(b), t_end)) for f in record.get("faults", []) for a, b in f.get("windows_s", [])
-                    if float(a) <= t_end)
-    return CaseTruth(case.case, case.aircraft, case.group, case.split, case.fault_type, case.target, case.size,
-                     case.size_rank, tuple(sorted(windows)), float(record.get("arm_s") or 0.0), t_end, case.negative)
-
-
-def case_outputs(log_path: Path) -> dict[str, CaseOutput]:
-    """Per member id, and :data:`BANK`, the method's output on one flown case (module docstring)."""
-    from fdi_sim.flightlog import read_log
-
-    log = read_log(log_path)
-    try:
-        members = {m["id"]: m for m in json.loads(log.metadata.get("fdi", {}).get("members", "[]"))}
-    except (TypeError, ValueError):
-        members = {}
-    out: dict[str, CaseOutput] = {}
-    alarms, scores, isos = [], [], []
-    t_ref = None
-    for topic, data in log.topics.items():
-        parts = topic.split("/")
-        if not (len(parts) == 4 and parts[1] == "fdi" and parts[3] == "statistic"):
-            continue
-        ident = parts[2]
-        t = np.asarray(data.t_s, dtype=float)
-        alarm = np.asarray(data["alarm"]) > 0.5
-        valid = np.asarray(data["valid"]) > 0.5
-        with np.errstate(divide="ignore", invalid="ignore"):
-            score = np.where(valid, np.asarray(data["statistic"], float) / np.asarray(data["threshold"], float), np.nan)
-        hyps = members.get(ident, {}).get("hypotheses", [])
-        k = np.asarray(data["isolation"]).astype(np.int64)
-        iso = [hyps[j] if a and 0 <= j < len(hyps) else None for j, a in zip(k, alarm)]
-        out[ident] = CaseOutput(t, alarm, score, iso)
-        if t_ref is None or np.array_equal(t, t_ref):
-            t_ref = t
-            alarms.append(alarm)
-            scores.append(score)
-            isos.append(iso)
-    if alarms and t_ref is not None:
-        a = np.any(alarms, axis=0)
-        with np.errstate(invalid="ignore"):
-            s = np.nanmax(np.where(np.isnan(scores), -np.inf, scores), axis=0)
-        s = np.where(np.isfinite(s), s, np.nan)
-        iso_bank = [next((m[j] for m in isos if m[j] is not None), None) for j in range(len(t_ref))]
-        out[BANK] = CaseOutput(t_ref, a, s, iso_bank)
-    return out
-
-
-@dataclass(frozen=True)
-class BenchResult:
-    """A scored benchmark run.
-
-    Attributes
-    ----------
-    suite, suite_hash, bank : str
-    cases : int
-        Cases asked for.
-    scored : dict
-        Split (``all`` and each split present) -> method (member id or ``bank``) -> the scorer's dict.
-    not_completed : list of dict
-        Cases that did not complete (case, status, reason).
-    flight_h : float
-        Flight hours of the scored cases [h].
-    """
-
-    suite: str
-    suite_hash: str
-    bank: str
-    cases: int
-    scored: dict[str, dict[str, dict[str, Any]]]
-    not_completed: list[dict[str, Any]]
-    flight_h: float
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"suite": self.suite, "suite_hash": self.suite_hash, "bank": self.bank, "cases": self.cases,
-                "flight_h": self.flight_h, "not_completed": self.not_completed, "scored": self.scored}
-
-
-def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
-    """Score the selected cases found in a results folder (every member and the bank, per split).
-
-    Raises
-    ------
-    BenchError
-        A selected case not flown yet (run ``bench run`` again), or a completed case without its log.
-    """
-    from fdi_sim.study.execute import load_records
-
-    suite = study._suite
-    out = Path(out_dir)
-    recs = {int(r["index"]): r for r in load_records(out)}
-    missing = [suite.cases[i].case for i in study.selected if i not in recs]
-    if missing:
-        raise BenchError(str(out), "", f"{len(missing)} selected case(s) are not flown yet (first {missing[:3]})",
-                         "run the same `fdi-sim bench run` again: it flies only those")
-    truths: list[CaseTruth] = []
-    outputs: dict[str, dict[str, CaseOutput]] = {}
-    bad = []
-    for i in study.selected:
-        r, case = recs[i], suite.cases[i]
-        if r.get("status") != "completed":
-            bad.append({"case": case.case, "status": r.get("status"), "reason": r.get("reason", "")})
-            continue
-        if not r.get("log"):
-            raise BenchError(str(out / "runs" / f"{i:06d}.json"), "log", "a completed case without its statistics log",
-                             "delete the record and run `fdi-sim bench run` again")
-        truths.append(case_truth(case, r))
-        for ident, o in case_outputs(out / "runs" / r["log"]).items():
-            outputs.setdefault(ident, {})[case.case] = o
-    scored: dict[str, dict[str, dict[str, Any]]] = {}
-    splits = ["all"] + [s for s in ("train", "validation", "test") if any(t.split == s for t in truths)]
-    for sp in splits:
-        ts = [t for t in truths if sp == "all" or t.split == sp]
-        scored[sp] = {}
-        for ident, outs in outputs.items():
-            mine = [t for t in ts if t.case in outs]  # a member skipped at a design point has no output there
-            if mine:
-                scored[sp][ident] = score_suite(mine, outs) | {"cases_scored": len(mine), "cases_without": len(ts) - len(mine)}
-    assert study.bank is not None
-    return BenchResult(suite.name, suite.hash, study.bank.name, len(study.selected), scored, bad,
-                       sum(t.t_end_s for t in truths) / 3600.0)

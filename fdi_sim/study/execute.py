@@ -348,8 +348,9 @@ def fly_study(study: Study, out_dir: str | Path, *, workers: int | None = None, 
     Raises
     ------
     StudyError
-        A folder of another study, a scheduler that does not answer, too little disk, a bank that
-        cannot be designed: all before any run flies.
+        A folder of another study, a scheduler that does not answer, too little disk: before any run
+        flies; a bank that cannot be designed: when its design task ends (runs of other designs
+        finished by then are kept).
     """
     held: dict[str, Any] = {"client": client, "cluster": None}
     if client is None and scheduler:  # a scheduler that does not answer: said before the folder is made
@@ -408,17 +409,24 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
             futures.append(client.submit(fly_run, i, sc.to_json(), sc.source, study.model.time_limit_s, keep,
                                          params, design_futs[key_of[i]], key=f"run-{study.identity()}-{i}",
                                          retries=study.model.retries, pure=False))
-        for fut in design_futs.values():
-            r = fut.result()
-            if r.get("error"):
-                raise StudyError(study.source, "bank", f"the bank cannot be designed: {r['error']}",
-                                 "fix the bank section or the sampled point (or bank.on_design_failure = \"skip\")")
-        alarms = 0
+        alarms = designed = 0
         if signals.stop_requested():
             raise KeyboardInterrupt
-        for fut in as_completed(futures, loop=client.loop):
+        is_design = {f.key for f in design_futs.values()}
+        # designs and runs as they finish: a run of a finished design is stored while other designs
+        # still fly their training flights (a study of many designs showed nothing for minutes)
+        for fut in as_completed([*design_futs.values(), *futures], loop=client.loop):
             if signals.stop_requested():  # a Ctrl-C or SIGTERM whose exception was dropped (fdi_sim.signals)
                 raise KeyboardInterrupt
+            if fut.key in is_design:
+                r = fut.result()
+                if r.get("error"):
+                    raise StudyError(study.source, "bank", f"the bank cannot be designed: {r['error']}",
+                                     "fix the bank section or the sampled point (or bank.on_design_failure = \"skip\")")
+                designed += 1
+                if bar is not None and designed < len(design_futs):
+                    bar.set_postfix_str(f"{designed}/{len(design_futs)} bank designs ready, {flown} runs stored")
+                continue
             try:
                 res = fut.result()
             except Exception as exc:  # a worker lost too often, a task cancelled: not the flight's fault

@@ -18,14 +18,8 @@ import pytest
 from fdi_sim.bench import suite as suite_mod
 from fdi_sim.bench.errors import BenchError
 from fdi_sim.bench.export import HASH_KEY, read_truths, scores_file_for
-from fdi_sim.bench.run import (
-    BANK,
-    bench_bank,
-    case_outputs,
-    fly_bench,
-    score_folder,
-    suite_study,
-)
+from fdi_sim.bench.run import bench_bank, fly_bench, suite_study
+from fdi_sim.bench.score import BANK, case_outputs, score_folder
 from fdi_sim.bench.suite import FROZEN, SPLITS, load_suite, resolve_suite
 from fdi_sim.cli import main
 from fdi_sim.study.execute import TIMING_KEYS, load_records
