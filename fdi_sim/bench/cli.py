@@ -7,6 +7,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
+# one JSON fallback for numpy values in both commands
+from fdi_sim.study.cli import _jsonable
+
 #: the results of a benchmark run, written into its folder
 RESULT_FILE = "bench.json"
 
@@ -176,12 +179,3 @@ def format_scores(scored: dict[str, dict[str, Any]], title: str) -> str:
                      f"{_f(e['f1'], '6.2f')} {_f(smp['auroc'], '6.3f')} {_f(smp['auprc'], '6.3f')}")
     return "\n".join(lines)
 
-
-def _jsonable(x: Any) -> Any:
-    import numpy as np
-
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    return str(x)
