@@ -2,8 +2,8 @@
 
 Per member, its ``/fdi/<id>/statistic`` topic gives the alarm, the score ``statistic / threshold``
 (so that scores of differently scheduled thresholds rank on one scale; NaN where not valid) and the
-isolation; the bank: the OR of the members' alarms, the largest member score, the isolation of the
-first member alarming. Only completed cases are scored; the others are listed with their status.
+isolation; the bank: the OR of the members' alarms, the largest member score, and at each sample the
+isolation of the first member (in the log's order) that alarms and names one. Only completed cases are scored; the others are listed with their status.
 The definitions are :mod:`fdi_sim.scoring`'s.
 """
 from __future__ import annotations
