@@ -103,15 +103,19 @@ def _leaderboard(flown: dict[str, dict]) -> str:
     for name, d in flown.items():
         r = d["result"]
         rows = []
-        for m, s in r["scored"]["all"].items():
-            label = ("default bank" if m == "bank" else f"{m} (in the default bank)") if name == "default" else \
-                ("all detectors (OR)" if m == "bank" else m)
-            rows.append(Row(label, r["bank"], r["suite"], r["suite_hash"], "all", s))
+        subsets = [k for k in r["scored"] if k.startswith("aircraft:")] if name == "default" else ["all"]
+        for sub in subsets:
+            ac = {"aircraft:f16": "F-16", "aircraft:DHC6": "DHC-6"}.get(sub, "")
+            for m, sc in r["scored"][sub].items():
+                label = (f"default bank, {ac}" if m == "bank" else f"{m} ({ac} default bank)") if name == "default" \
+                    else ("all detectors (OR)" if m == "bank" else m)
+                rows.append(Row(label, r["bank"], r["suite"], r["suite_hash"], sub, sc))
         rows.sort(key=lambda x: (-(x.scores["alfa"].get("f1") or 0.0), -(x.scores["event"].get("f1") or 0.0)))
-        nc = r["not_completed"]
+        nc, dep = r["not_scored"], r["departed"]
         parts += [f"**{'Default banks' if name == 'default' else 'Every registered detector'}**, {d['caption']}: "
-                  f"{r['cases']} cases, {r['flight_h']:.1f} flight h scored"
-                  + (f"; {len(nc)} not completed ({', '.join(sorted({x['status'] for x in nc}))}: "
+                  f"{r['cases']} cases, {r['flight_h']:.1f} flight h scored; {len(dep)} departed (scored up to the "
+                  f"departure: {_departures(dep)})"
+                  + (f"; {len(nc)} not scored ({', '.join(sorted({x['status'] for x in nc}))}: "
                      f"{', '.join(x['case'] for x in nc[:4])}{'...' if len(nc) > 4 else ''})" if nc else "") + ".", "",
                   leaderboard_markdown(rows), ""]
     parts.append(f"ALFA's RLS (Keipour et al. 2019): precision {ALFA_RLS['precision']:.2%}, recall "
@@ -119,6 +123,13 @@ def _leaderboard(flown: dict[str, dict]) -> str:
                  "both the precision and the recall above it on the ALFA criterion here, in brackets the fault classes "
                  "where that holds (each class's fault flights with every fault-free one).")
     return "\n".join(parts)
+
+
+def _departures(dep: list[dict]) -> str:
+    from collections import Counter
+
+    groups = Counter(d["case"].split("/")[0] for d in dep)
+    return ", ".join(f"{g} {n}" for g, n in groups.most_common()) or "none"
 
 
 def _cost(flown: dict[str, dict], workers: int) -> str:

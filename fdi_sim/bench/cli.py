@@ -110,7 +110,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(json.dumps(d, default=_jsonable))
     else:
         print(format_scores(d["scored"].get("all", {}), f"{suite.name} / {bank.name}: {res.cases} cases "
-                            f"({len(res.not_completed)} not completed), {res.flight_h:.2f} flight h scored"))
+                            f"({len(res.departed)} departed, scored to the departure; {len(res.not_scored)} not scored), "
+                            f"{res.flight_h:.2f} flight h scored"))
         if o.flown:
             print(f"this call flew {o.flown} cases ({o.flight_h:.2f} flight h) in {o.wall_s:.0f} s: "
                   f"{o.flight_h / (o.wall_s / 3600.0):.0f} flight h per hour")
@@ -157,7 +158,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from fdi_sim.bench.export import export
 
     o = export(args.results, args.out, progress=not args.quiet)
-    print(f"export     {o.cases} cases ({o.skipped} not completed, left out), {o.topics} topics, {o.grid_rows} grid "
+    print(f"export     {o.cases} cases ({o.skipped} interrupted or failed, left out), {o.topics} topics, {o.grid_rows} grid "
           f"rows, {o.bytes / 1e6:.1f} MB -> {o.out_dir}")
     return 0
 

@@ -3,9 +3,10 @@
 Export (reads a benchmark results folder's logs and labels only; flies nothing)::
 
     OUT/suite.json          suite, suite_hash, bank, grid_hz, the fdi-sim version, the schema below
-    OUT/cases.parquet       one row per completed flight: case, index, split, aircraft, group, phase,
-                            fault_type, fault_class, target, size, size_rank, negative, arm_s, t_end_s,
-                            faulty (the per-flight label)
+    OUT/cases.parquet       one row per scored flight (completed or departed: fdi_sim.bench.score):
+                            case, index, split, aircraft, group, phase, fault_type, fault_class,
+                            target, size, size_rank, negative, arm_s, t_end_s, status, faulty (the
+                            per-flight label)
     OUT/events.parquet      one row per fault window: case, fault_class, fault_type, target, size,
                             onset_s, end_s
     OUT/topics/<topic>.parquet
@@ -96,7 +97,7 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from fdi_sim.bench.score import case_truth
+    from fdi_sim.bench.score import SCORED_STATUSES, case_truth
     from fdi_sim.flightlog import VectorTopic, read_log
     from fdi_sim.scoring import sample_grid
     from fdi_sim.study.execute import load_records
@@ -128,7 +129,7 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
             if bar is not None:
                 bar.update(1)
             c = by_index[int(r["index"])]
-            if r.get("status") != "completed" or not r.get("log"):
+            if r.get("status") not in SCORED_STATUSES or not r.get("log"):
                 skipped += 1
                 continue
             case = _case_obj(c)
@@ -137,6 +138,7 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
             case_rows.append({**{k: c[k] for k in ("case", "index", "split", "aircraft", "group", "phase", "fault_type",
                                                     "target", "size", "size_rank", "negative")},
                               "fault_class": truth.fault_class, "arm_s": truth.arm_s, "t_end_s": truth.t_end_s,
+                              "status": r["status"],
                               "faulty": bool(truth.windows_s)})
             for w0, w1 in truth.windows_s:
                 event_rows.append({"case": c["case"], "fault_class": truth.fault_class, "fault_type": c["fault_type"],
@@ -192,7 +194,7 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
     (out / "suite.json").write_text(json.dumps({
         "suite": meta["suite"], "suite_hash": meta["suite_hash"], "bank": study.get("study", {}).get("bank"),
         "grid_hz": grid_hz, "fdi_sim": __version__, "schema_version": SCHEMA_VERSION, "source": str(src),
-        "cases": len(case_rows), "skipped_not_completed": skipped}, indent=1))
+        "cases": len(case_rows), "skipped_not_scored": skipped}, indent=1))
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
     return ExportOutcome(out, len(case_rows), skipped, len(writers), grid_rows, size)
 

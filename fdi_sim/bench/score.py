@@ -3,7 +3,12 @@
 Per member, its ``/fdi/<id>/statistic`` topic gives the alarm, the score ``statistic / threshold``
 (so that scores of differently scheduled thresholds rank on one scale; NaN where not valid) and the
 isolation; the bank: the OR of the members' alarms, the largest member score, and at each sample the
-isolation of the first member (in the log's order) that alarms and names one. Only completed cases are scored; the others are listed with their status.
+isolation of the first member (in the log's order) that alarms and names one.
+
+Which cases count: completed ones, and **departed** ones (status ``diverged``: the aircraft left the
+envelope; its log is whole up to the departure, and a fault that departs the aircraft is the one a
+detector most needs to catch), scored up to their end. Cases that were interrupted, timed out or
+raised are listed with their status and not scored: their flight did not end by the physics.
 The definitions are :mod:`fdi_sim.scoring`'s.
 """
 from __future__ import annotations
@@ -22,6 +27,8 @@ from fdi_sim.bench.suite import Case
 from fdi_sim.scoring import CaseOutput, CaseTruth, score_suite
 
 BANK = "bank"
+#: the run statuses a benchmark scores (module docstring)
+SCORED_STATUSES = ("completed", "diverged")
 
 
 def case_truth(case: Case, record: Mapping[str, Any]) -> CaseTruth:
@@ -84,9 +91,12 @@ class BenchResult:
     cases : int
         Cases asked for.
     scored : dict
-        Split (``all`` and each split present) -> method (member id or ``bank``) -> the scorer's dict.
-    not_completed : list of dict
-        Cases that did not complete (case, status, reason).
+        Subset (``all``, each split present, ``aircraft:<aircraft>``) -> method (member id or ``bank``)
+        -> the scorer's dict.
+    not_scored : list of dict
+        Cases interrupted, timed out or failed (case, status, reason): not scored.
+    departed : list of dict
+        Cases that departed (status ``diverged``; case, reason): scored up to the departure.
     flight_h : float
         Flight hours of the scored cases [h].
     """
@@ -96,12 +106,14 @@ class BenchResult:
     bank: str
     cases: int
     scored: dict[str, dict[str, dict[str, Any]]]
-    not_completed: list[dict[str, Any]]
+    not_scored: list[dict[str, Any]]
+    departed: list[dict[str, Any]]
     flight_h: float
 
     def to_dict(self) -> dict[str, Any]:
         return {"suite": self.suite, "suite_hash": self.suite_hash, "bank": self.bank, "cases": self.cases,
-                "flight_h": self.flight_h, "not_completed": self.not_completed, "scored": self.scored}
+                "flight_h": self.flight_h, "not_scored": self.not_scored, "departed": self.departed,
+                "scored": self.scored}
 
 
 def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
@@ -123,27 +135,32 @@ def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
                          "run the same `fdi-sim bench run` again: it flies only those")
     truths: list[CaseTruth] = []
     outputs: dict[str, dict[str, CaseOutput]] = {}
-    bad = []
+    bad, departed = [], []
     for i in study.selected:
         r, case = recs[i], suite.cases[i]
-        if r.get("status") != "completed":
+        if r.get("status") not in SCORED_STATUSES:
             bad.append({"case": case.case, "status": r.get("status"), "reason": r.get("reason", "")})
             continue
         if not r.get("log"):
-            raise BenchError(str(out / "runs" / f"{i:06d}.json"), "log", "a completed case without its statistics log",
+            raise BenchError(str(out / "runs" / f"{i:06d}.json"), "log", "a flown case without its statistics log",
                              "delete the record and run `fdi-sim bench run` again")
+        if r["status"] == "diverged":
+            departed.append({"case": case.case, "reason": r.get("reason", "")})
         truths.append(case_truth(case, r))
         for ident, o in case_outputs(out / "runs" / r["log"]).items():
             outputs.setdefault(ident, {})[case.case] = o
     scored: dict[str, dict[str, dict[str, Any]]] = {}
-    splits = ["all"] + [s for s in ("train", "validation", "test") if any(t.split == s for t in truths)]
-    for sp in splits:
-        ts = [t for t in truths if sp == "all" or t.split == sp]
+    # "all", each split, and each aircraft (a default bank is one per aircraft: "aircraft:f16")
+    subsets = {"all": truths} | {sp: [t for t in truths if t.split == sp] for sp in ("train", "validation", "test")}
+    subsets |= {f"aircraft:{a}": [t for t in truths if t.aircraft == a] for a in sorted({t.aircraft for t in truths})}
+    for sp, ts in subsets.items():
+        if not ts:
+            continue
         scored[sp] = {}
         for ident, outs in outputs.items():
             mine = [t for t in ts if t.case in outs]  # a member skipped at a design point has no output there
             if mine:
                 scored[sp][ident] = score_suite(mine, outs) | {"cases_scored": len(mine), "cases_without": len(ts) - len(mine)}
     assert study.bank is not None
-    return BenchResult(suite.name, suite.hash, study.bank.name, len(study.selected), scored, bad,
+    return BenchResult(suite.name, suite.hash, study.bank.name, len(study.selected), scored, bad, departed,
                        sum(t.t_end_s for t in truths) / 3600.0)

@@ -110,7 +110,7 @@ def test_one_worker_gives_the_records_of_two(flown):
 
 def test_scores_come_from_the_logs_and_match_the_records(flown):
     res = score_folder(flown["study"], flown["tmp"] / "two")
-    assert res.not_completed == [] and res.cases == 4
+    assert res.not_scored == [] and res.departed == [] and res.cases == 4
     s = res.scored["all"]
     recs = load_records(flown["tmp"] / "two")
     # the bank's detections by the scorer equal the run records' (earliest member detection per fault)
