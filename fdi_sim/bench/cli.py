@@ -22,13 +22,15 @@ def add_parser(sub: Any) -> None:
     r.add_argument("--suite", default="fdi-bench-v1", help="a shipped suite version or a suite file")
     r.add_argument("--bank", default=None, choices=("default",), help="the aircraft's default bank (default when no "
                    "--detector is given)")
-    r.add_argument("--detector", action="append", default=[], metavar="ID", help="a registered or plugin detector, "
-                   "flown beside the others with reconfiguration off (repeatable)")
+    r.add_argument("--detector", action="append", default=[], metavar="ID[:key=value,...]", help="a registered or "
+                   "plugin detector with design options, flown beside the others with reconfiguration off (repeatable)")
     r.add_argument("--split", default=None, choices=("train", "validation", "test"), help="only this split's cases")
     r.add_argument("--group", action="append", default=[], metavar="PATTERN", help="only these groups (fnmatch "
                    "patterns; repeatable)")
     r.add_argument("--aircraft", default=None, help="only this aircraft's cases (f16, DHC6)")
     r.add_argument("--per-group", type=int, default=None, metavar="N", help="at most N cases per group and size")
+    r.add_argument("--full-logs", action="store_true", help="keep the 120 Hz sensor, command and truth topics too "
+                   "(about 0.5 GB per flight hour: what `fdi-sim export` gives a learned detector); a folder of its own")
     r.add_argument("--out", default=None, help="results folder (default: bench/<suite>.<bank>); the same folder "
                    "resumes and grows")
     r.add_argument("--workers", type=int, default=None, help="local cluster workers (default: the cores)")
@@ -78,7 +80,7 @@ def cmd_list(args: argparse.Namespace) -> int:
 def _out_dir(args: argparse.Namespace, suite: Any, bank: Any) -> Path:
     if args.out:
         return Path(args.out)
-    return Path("bench") / f"{suite.name}.{bank.name.replace(':', '-').replace('+', '.')}"[:120]
+    return Path("bench") / f"{suite.name}.{bank.slug}"[:120]
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -90,7 +92,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     suite = load_suite(args.suite)
     bank = bench_bank(default=not args.detector, detector_ids=args.detector)
     cases = suite.select(split=args.split, groups=tuple(args.group), aircraft=args.aircraft, per_group=args.per_group)
-    st = suite_study(suite, bank, cases)
+    st = suite_study(suite, bank, cases, full_logs=args.full_logs)
     out = _out_dir(args, suite, bank)
     if not args.quiet:
         print(f"bench      {suite.name} ({suite.hash[:12]}), {bank.name}: {len(cases)} cases, "

@@ -11,11 +11,18 @@ Export (reads a benchmark results folder's logs and labels only; flies nothing):
                             onset_s, end_s
     OUT/topics/<topic>.parquet
                             each vector topic of the logs on the log clock: case, t_s, its fields
-                            (``/fdi/kalman-gust-v1/statistic`` -> ``fdi.kalman-gust-v1.statistic.parquet``)
-    OUT/grid.parquet        every case on the scorer's uniform grid (fdi_sim.scoring.GRID_HZ)
+                            (``/fdi/kalman-gust-v1/statistic`` -> ``fdi.kalman-gust-v1.statistic.parquet``;
+                            a topic whose fields differ between cases, a fault's own, gets one file
+                            per field set, ``<topic>.<hash of the fields>.parquet``); the truth and
+                            fault topics are there for analysis: never a learner's input
+    OUT/grid.<aircraft>.parquet
+                            every case on the scorer's uniform grid (fdi_sim.scoring.GRID_HZ)
                             from 0 to t_end_s: case, split, t_s, label (1 fault, 0 fault-free, -1 the
-                            grace after a window: left out by the scorer), then every topic field held
-                            from its latest sample (``<topic>.<field>``, NaN before the first)
+                            grace after a window: left out by the scorer), then the fields of the
+                            measurement, command and bank topics (:data:`GRID_TOPICS`) held from their
+                            latest sample (``<topic>.<field>``, NaN before the first); cases whose
+                            columns differ from the first of their aircraft (another member set) go
+                            to ``grid.<aircraft>.<hash of the columns>.parquet``
 
 A benchmark run keeps the FDI topics (statistics at the detector rate) by default; with
 ``--full-logs`` the 120 Hz sensor, command and truth topics too (about 0.5 GB per flight hour),
@@ -30,6 +37,7 @@ within a case, times outside ``[0, t_end_s]``, no score and no alarm.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -47,6 +55,9 @@ SCHEMA_VERSION = 1
 CASES_FILE = "bench_cases.json"
 #: Parquet metadata key of a scores file's suite hash
 HASH_KEY = b"fdi_bench.suite_hash"
+#: the topics the grid holds: what a detector can see (measurements, commands) and the in-loop bank's
+#: outputs; never /truth or /faults (they would hand a learner its label)
+GRID_TOPICS = ("/sensors/", "/commands/", "/fdi/")
 #: a time this far past the end of the flight is still inside it [s] (the log's last sample)
 T_TOL_S = 1e-6
 
@@ -116,7 +127,7 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
     study = json.loads((src / "study.json").read_text())
     recs = [r for r in load_records(src) if int(r["index"]) in by_index]
     writers: dict[str, Any] = {}
-    grid_writer = None
+    grid_writers: dict[str, Any] = {}
     case_rows, event_rows = [], []
     skipped = grid_rows = 0
     bar = None
@@ -158,32 +169,40 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
                 tbl = pa.table({"case": pa.array([c["case"]] * len(data), pa.string()),
                                 **{f: pa.array(arr[:, j]) for j, f in enumerate(data.fields)}})
                 name = _topic_file(topic)
+                if name in writers and not writers[name].schema.equals(tbl.schema):
+                    # a fault's own topic names its target's fields: one file per field set
+                    sig = hashlib.sha256(",".join(data.fields).encode()).hexdigest()[:8]
+                    name = name.removesuffix(".parquet") + f".{sig}.parquet"
                 if name not in writers:
                     writers[name] = pq.ParquetWriter(out / "topics" / f".{name}.tmp", tbl.schema)
                 writers[name].write_table(tbl)
+                if not topic.startswith(GRID_TOPICS):
+                    continue  # truth and fault state would leak the label into a learner's features
                 k = np.searchsorted(arr[:, 0], g + 1e-9, side="right") - 1
                 for j, f in enumerate(data.fields[1:], start=1):
                     col = np.full(g.size, np.nan)
                     col[k >= 0] = arr[k[k >= 0], j]
                     cols[f"{topic.strip('/').replace('/', '.')}.{f}"] = pa.array(col)
             gt = pa.table(cols)
-            if grid_writer is None:
-                grid_schema = gt.schema
-                grid_writer = pq.ParquetWriter(out / ".grid.parquet.tmp", grid_schema)
-            gt = _conform(gt, grid_writer.schema)
-            grid_writer.write_table(gt)
+            gname = f"grid.{c['aircraft']}.parquet"  # the aircraft's sensors differ (the DHC-6's engine gauges)
+            if gname in grid_writers and not grid_writers[gname].schema.equals(gt.schema):
+                gname = gname.removesuffix(".parquet") + "." + hashlib.sha256(
+                    ",".join(gt.column_names).encode()).hexdigest()[:8] + ".parquet"  # another bank member set
+            if gname not in grid_writers:
+                grid_writers[gname] = pq.ParquetWriter(out / f".{gname}.tmp", gt.schema)
+            grid_writers[gname].write_table(gt)
             grid_rows += gt.num_rows
     finally:
         if bar is not None:
             bar.close()
         for w in writers.values():
             w.close()
-        if grid_writer is not None:
-            grid_writer.close()
+        for w in grid_writers.values():
+            w.close()
     for name in writers:
         (out / "topics" / f".{name}.tmp").replace(out / "topics" / name)
-    if grid_writer is not None:
-        (out / ".grid.parquet.tmp").replace(out / "grid.parquet")
+    for name in grid_writers:
+        (out / f".{name}.tmp").replace(out / name)
     pq.write_table(pa.Table.from_pylist(case_rows), out / "cases.parquet")
     ev_schema = pa.schema([("case", pa.string()), ("fault_class", pa.string()), ("fault_type", pa.string()),
                            ("target", pa.string()), ("size", pa.string()), ("onset_s", pa.float64()),
@@ -197,17 +216,6 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
         "cases": len(case_rows), "skipped_not_scored": skipped}, indent=1))
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
     return ExportOutcome(out, len(case_rows), skipped, len(writers), grid_rows, size)
-
-
-def _conform(t: Any, schema: Any) -> Any:
-    """A case's grid table with the first case's columns (a member missing here: NaN; an extra one:
-    dropped, named in the folder's notes by the caller)."""
-    import pyarrow as pa
-
-    cols = []
-    for f in schema:
-        cols.append(t.column(f.name) if f.name in t.column_names else pa.nulls(t.num_rows, f.type))
-    return pa.Table.from_arrays(cols, schema=schema)
 
 
 def _case_obj(c: Mapping[str, Any]) -> Any:

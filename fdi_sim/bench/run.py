@@ -25,7 +25,7 @@ from typing import Any
 
 from fdi_sim.bench.errors import BenchError
 from fdi_sim.bench.suite import Case, Suite
-from fdi_sim.study.spec import Study, StudyModel
+from fdi_sim.study.spec import OutputSection, Study, StudyModel
 
 #: the default bank's design: per schedule-grid node at nominal conditions, moderate turbulence
 DESIGN = {"point": "grid", "turbulence": "moderate", "wind_speed_kts": 0.0, "noise_scale": 1.0}
@@ -51,6 +51,13 @@ class BenchBank:
     fdi: Mapping[str, Any]
     detectors: tuple[Mapping[str, Any], ...] = ()
 
+    @property
+    def slug(self) -> str:
+        """The name as a file name (``detectors-parity-v1.pca-v1``, options kept as ``key-value``)."""
+        import re
+
+        return re.sub(r"[^A-Za-z0-9_.\-]+", "-", self.name.replace("+", ".")).strip("-")
+
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "fdi": dict(self.fdi), "detectors": [dict(d) for d in self.detectors]}
 
@@ -64,23 +71,30 @@ def bench_bank(default: bool = True, detector_ids: Sequence[str] = ()) -> BenchB
         An unknown detector id, or both or neither given.
     """
     from fdi_sim import registry
-    from fdi_sim.errors import RegistryError
+    from fdi_sim.errors import RegistryError, ScenarioError
 
     if bool(default) == bool(detector_ids):
         raise BenchError("fdi-sim bench run", "--bank / --detector", "give the default bank or detectors, not both",
                          "--bank default, or --detector ID (repeatable; `fdi-sim plugins` lists them)")
     if default:
         return BenchBank("default", {"bank": "default", "far_per_h": 0.1, "design": dict(DESIGN)})
-    ids = list(dict.fromkeys(detector_ids))
-    for i in ids:
+    from fdi_sim.detectors.spec import check_options, parse_detector_arg
+
+    specs = [parse_detector_arg(d) for d in dict.fromkeys(detector_ids)]  # ID[:key=value,...]
+    for spec in specs:
         try:
-            registry.get("detector", i)
+            registry.get("detector", spec.id)
+            check_options(spec)
         except RegistryError as exc:
             raise BenchError("fdi-sim bench run", "--detector", str(exc).strip("'\""),
                              "give a registered detector id (`fdi-sim plugins`)") from None
+        except ScenarioError as exc:
+            raise BenchError("fdi-sim bench run", f"--detector {spec.id}", exc.problem, exc.fix) from None
+    ids = [s.id + (":" + ",".join(f"{k}={json.dumps(v)}" for k, v in sorted(s.params.items())) if s.params else "")
+           for s in specs]
     fdi = {"bank": "none", "far_per_h": 0.1, "thresholds": "trained", "reconfigure": False,
            "on_design_failure": "skip", "design": dict(DESIGN)}
-    return BenchBank("detectors:" + "+".join(ids), fdi, tuple({"type": i} for i in ids))
+    return BenchBank("detectors:" + "+".join(ids), fdi, tuple({"type": s.id, **dict(s.params)} for s in specs))
 
 
 @dataclass(frozen=True)
@@ -114,8 +128,10 @@ class SuiteStudy(Study):
         """The suite's hash, the bank and the code version: a folder holds the cases of one of each."""
         from fdi_sim import __version__
 
-        blob = json.dumps({"suite": self._suite.hash, "bank": self.bank.to_dict() if self.bank else None,
-                           "version": __version__}, sort_keys=True)
+        d = {"suite": self._suite.hash, "bank": self.bank.to_dict() if self.bank else None, "version": __version__}
+        if self.model.output.full_logs:  # (only then: folders of statistics logs keep their identity)
+            d["full_logs"] = True
+        blob = json.dumps(d, sort_keys=True)
         return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
     def run_scenario(self, index: int) -> tuple[Any, dict[str, Any]]:
@@ -126,19 +142,22 @@ class SuiteStudy(Study):
         assert self.bank is not None
         data["fdi"] = {**self.bank.fdi, "log_residuals": False}
         data["detectors"] = [dict(d) for d in self.bank.detectors]
+        data["log"] = {"per_step": bool(self.model.output.full_logs)}  # the 120 Hz topics too (export)
         sc = from_dict(data, source=f"{self._suite.source} case {case.case}")
         return sc, {"case": case.case, **json.loads(case.params)}
 
 
-def suite_study(suite: Suite, bank: BenchBank, cases: Sequence[Case]) -> SuiteStudy:
-    """The study that flies ``cases`` of ``suite`` with ``bank``."""
+def suite_study(suite: Suite, bank: BenchBank, cases: Sequence[Case], *, full_logs: bool = False) -> SuiteStudy:
+    """The study that flies ``cases`` of ``suite`` with ``bank`` (``full_logs``: the 120 Hz topics too,
+    what a learned detector trains on; a folder of its own)."""
     if not cases:
         raise BenchError(suite.source, "--split / --group", "the selection holds no case",
                          "widen it (`fdi-sim bench run --list` shows the groups and splits)")
-    model = StudyModel(kind="study", name=f"{suite.name}.{bank.name.replace(':', '-').replace('+', '.')}"[:100],
+    model = StudyModel(kind="study", name=f"{suite.name}.{bank.slug}"[:100],
                        description=f"{suite.name} flown with {bank.name}", scenario="(suite)", seed=suite.model.seed,
                        runs=len(suite.cases), duration_s=max(c.duration_s for c in suite.cases),
-                       time_limit_s=TIME_LIMIT_S, bank=dict(bank.fdi))
+                       time_limit_s=TIME_LIMIT_S, bank=dict(bank.fdi),
+                       output=OutputSection(statistics=True, full_logs=bool(full_logs)))
     probe = SuiteStudy(model, suite.source, None, suite, bank, tuple(c.index for c in cases))  # type: ignore[arg-type]
     base, _ = probe.run_scenario(cases[0].index)
     return SuiteStudy(model, suite.source, base, suite, bank, tuple(c.index for c in cases))

@@ -141,7 +141,9 @@ def test_the_export_is_parquet_read_by_pyarrow_with_labels_and_splits(flown, exp
     assert {c["split"] for c in cases} <= set(SPLITS)
     ev = pq.read_table(exported / "events.parquet").to_pylist()
     assert {e["case"] for e in ev} == {c["case"] for c in cases}
-    grid = pq.read_table(exported / "grid.parquet")
+    grid = pq.read_table(exported / "grid.f16.parquet")
+    assert sorted(p.name for p in exported.glob("grid*.parquet")) == ["grid.f16.parquet"]
+    assert not any(c.startswith(("truth.", "faults.")) for c in grid.column_names)  # no label leak
     lab = np.asarray(grid.column("label"))
     assert set(np.unique(lab)) <= {-1, 0, 1} and (lab == 1).any() and (lab == 0).any()
     topics = sorted(p.name for p in (exported / "topics").glob("*.parquet"))
