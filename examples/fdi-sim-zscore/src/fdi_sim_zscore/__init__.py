@@ -19,7 +19,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["DETECTOR_ID", "ZScoreDetector", "make_zscore", "__version__"]
+__all__ = ["DETECTOR_ID", "ZScoreDetector", "__version__", "make_zscore"]
 __version__ = "0.1.0"
 
 DETECTOR_ID = "zscore-v1"
