@@ -44,8 +44,8 @@ FLIGHT = tuple(x for x in CODE if x not in ("fdi_sim/bench", "fdi_sim/decision",
 BANKS: tuple[tuple[str, dict, str], ...] = (
     ("default", {}, "the whole suite"),
     ("every-detector", {"split": "test"},
-     "the test split (every registered detector side by side, thresholds trained at the same design points, "
-     "reconfiguration off)"),
+     ("the test split (every registered detector side by side, thresholds trained at the same design points, "
+      "reconfiguration off)")),
 )
 
 
@@ -127,6 +127,28 @@ def _leaderboard(flown: dict[str, dict]) -> str:
     return "\n".join(parts)
 
 
+def _by_group(flown: dict[str, dict]) -> str:
+    """The default banks per suite group: where the false alarms and the detections are."""
+    r = flown["default"]["result"]
+    lines = [("| group | aircraft | cases | exposure h | false alarms | per h [95 %] | faults detected [95 %] | "
+              "delay median [s] | isolation right |"), "|---|---|---|---|---|---|---|---|---|"]
+    for key, methods in r["scored"].items():
+        if not key.startswith("group:") or "bank" not in methods:
+            continue
+        s = methods["bank"]
+        ac = key.split(":", 1)[1].split("-")[0]
+        far = "-" if s["far_per_h"] is None else \
+            f"{s['far_per_h']:.3f} [{s['far_per_h_ci'][0]:.3f}, {s['far_per_h_ci'][1]:.3f}]"
+        d = s["detection"]
+        det = "-" if not d["faults"] else f"{d['detected']['k']}/{d['faults']} [{d['detected']['ci'][0]:.2f}, " \
+                                          f"{d['detected']['ci'][1]:.2f}]"
+        iso = "-" if not d["isolation"]["n"] else f"{d['isolation']['k']}/{d['isolation']['n']}"
+        med = "-" if d["delay_s_median"] is None else f"{d['delay_s_median']:.2f}"
+        lines.append(f"| {key.split(':', 1)[1]} | {ac} | {s['cases']} | {s['exposure_h']:.2f} | {s['false_alarms']} | "
+                     f"{far} | {det} | {med} | {iso} |")
+    return "\n".join(lines)
+
+
 def _departures(dep: list[dict]) -> str:
     from collections import Counter
 
@@ -163,6 +185,7 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit("give --out-root DIR (the benchmark folders, reused when the code is the same)")
         flown = _fly(args.out_root, args.workers)
         text = replace_block(text, make_stamp("leaderboard", COMMAND, CODE), _leaderboard(flown))
+        text = replace_block(text, make_stamp("bench-by-group", COMMAND, CODE), _by_group(flown))
         text = replace_block(text, make_stamp("bench-cost", COMMAND, CODE), _cost(flown, args.workers))
     MD.write_text(text)
     print(f"wrote {MD}")
