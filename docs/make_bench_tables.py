@@ -71,6 +71,7 @@ def _suite_table() -> str:
 
 def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict]:
     from fdi_sim import registry
+    from fdi_sim.bench.cli import read_calls, record_call
     from fdi_sim.bench.run import bench_bank, fly_bench, suite_study
     from fdi_sim.bench.score import score_folder
     from fdi_sim.bench.suite import load_suite
@@ -88,6 +89,7 @@ def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict
         print(f"{name}: {len(cases)} cases, {suite.flight_h(cases):.1f} flight h -> {folder}", flush=True)
         t0 = time.perf_counter()
         o = fly_bench(st, folder, workers=workers, progress=True)
+        record_call(folder, o, workers, None)
         if o.interrupted or not o.complete:
             raise SystemExit(f"{name}: {o.done_before + o.flown} of {o.total} cases flown; run again to go on")
         res = score_folder(st, folder)
@@ -96,7 +98,8 @@ def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict
         out[name] = {"result": res.to_dict(), "caption": caption, "folder": str(folder),
                      "wall_s_sum": sum(float(r.get("wall_s", 0.0)) for r in recs),
                      "flight_h": sum(float(r.get("flight_h", 0.0)) for r in recs),
-                     "this_call": {"flown": o.flown, "wall_s": time.perf_counter() - t0, "flight_h": o.flight_h}}
+                     "this_call": {"flown": o.flown, "wall_s": time.perf_counter() - t0, "flight_h": o.flight_h},
+                     "calls": read_calls(folder)}
     return out
 
 
@@ -148,6 +151,16 @@ def _by_group(flown: dict[str, dict]) -> str:
         med = "-" if d["delay_s_median"] is None else f"{d['delay_s_median']:.2f}"
         lines.append(f"| {key.split(':', 1)[1]} | {ac} | {s['cases']} | {s['exposure_h']:.2f} | {s['false_alarms']} | "
                      f"{far} | {det} | {med} | {iso} |")
+    lines += ["", "The fault-free flights (hard negatives included) per phase:", "",
+              "| phase | flights | exposure h | false alarms | per h [95 %] | flights with one |", "|---|---|---|---|---|---|"]
+    for key, methods in r["scored"].items():
+        if key.startswith("phase:") and "bank" in methods:
+            s = methods["bank"]
+            far = "-" if s["far_per_h"] is None else \
+                f"{s['far_per_h']:.3f} [{s['far_per_h_ci'][0]:.3f}, {s['far_per_h_ci'][1]:.3f}]"
+            a = s["alfa"]
+            lines.append(f"| {key.split(':', 1)[1]} | {s['cases']} | {s['exposure_h']:.2f} | {s['false_alarms']} | {far} | "
+                         f"{a['fp']} |")
     return "\n".join(lines)
 
 
@@ -159,17 +172,19 @@ def _departures(dep: list[dict]) -> str:
 
 
 def _cost(flown: dict[str, dict], workers: int) -> str:
-    lines = ["| bank | cases | flight h | summed run wall time [s] | flight h per worker-hour | this call: wall [s], flight h per hour |",
+    lines = [("| bank | cases | flight h | summed run wall time [s] | flight h per worker-hour (runs only) | "
+              "calls that flew: cases, flight h, wall [s] (designs included), flight h per hour |"),
              "|---|---|---|---|---|---|"]
     for name, d in flown.items():
-        c = d["this_call"]
         rate = d["flight_h"] / (d["wall_s_sum"] / 3600.0) if d["wall_s_sum"] > 0 else None
-        call = (f"{c['wall_s']:.0f}, {c['flight_h'] / (c['wall_s'] / 3600.0):.0f} ({c['flown']} cases flown)"
-                if c["flown"] else "nothing flown (reused)")
+        calls = "; ".join(f"{c['flown']}, {c['flight_h']:.1f}, {c['wall_s']:.0f}, "
+                          f"{c['flight_h'] / (c['wall_s'] / 3600.0):.0f} ({c['workers'] or 'all'} workers"
+                          f"{', interrupted' if c['interrupted'] else ''})" for c in d["calls"])
         lines.append(f"| {name} | {d['result']['cases']} | {d['flight_h']:.1f} | {d['wall_s_sum']:.0f} | "
-                     f"{'-' if rate is None else f'{rate:.0f}'} | {call} |")
-    lines += ["", (f"{workers} worker(s) on this machine (2 cores); the summed run wall time excludes the designs "
-              "(training flights are cached per design and counted in no run).")]
+                     f"{'-' if rate is None else f'{rate:.0f}'} | {calls or 'not recorded (flown before the calls log)'} |")
+    lines += ["", ("On this machine (2 cores). The summed run wall time leaves out the designs (the training flights "
+                   "and calibrations of each design point, cached and counted in no run); a call's wall time includes "
+                   "them.")]
     return "\n".join(lines)
 
 

@@ -12,6 +12,29 @@ from fdi_sim.study.cli import _jsonable
 
 #: the results of a benchmark run, written into its folder
 RESULT_FILE = "bench.json"
+#: one line per call that flew something: what it flew and how long it took (the benchmark's cost)
+CALLS_FILE = "bench_calls.jsonl"
+
+
+def record_call(out: Path, outcome: Any, workers: int | None, scheduler: str | None) -> None:
+    """Append what a call flew to the folder's :data:`CALLS_FILE` (designs included in its wall time)."""
+    import datetime
+
+    if not outcome.flown:
+        return
+    line = {"date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"), "flown": outcome.flown,
+            "flight_h": outcome.flight_h, "wall_s": outcome.wall_s, "workers": workers, "scheduler": scheduler,
+            "interrupted": outcome.interrupted}
+    with open(out / CALLS_FILE, "a", encoding="utf-8") as f:
+        f.write(json.dumps(line) + "\n")
+
+
+def read_calls(out: Path) -> list[dict[str, Any]]:
+    """The folder's calls that flew something (none for a folder flown before the log existed)."""
+    try:
+        return [json.loads(x) for x in (out / CALLS_FILE).read_text().splitlines() if x.strip()]
+    except OSError:
+        return []
 
 
 def add_parser(sub: Any) -> None:
@@ -98,6 +121,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"bench      {suite.name} ({suite.hash[:12]}), {bank.name}: {len(cases)} cases, "
               f"{suite.flight_h(cases):.1f} flight h -> {out}", file=sys.stderr)
     o = fly_bench(st, out, workers=args.workers, scheduler=args.scheduler, progress=not args.quiet)
+    record_call(out, o, args.workers, args.scheduler)
     if o.interrupted or not o.complete:
         why = "interrupted" if o.interrupted else f"{o.lost} case(s) lost with their workers"
         print(f"fdi-sim bench run: {why}: {o.done_before + o.flown} of {o.total} cases are in {out}; run the same "

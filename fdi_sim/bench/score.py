@@ -91,8 +91,8 @@ class BenchResult:
     cases : int
         Cases asked for.
     scored : dict
-        Subset (``all``, each split present, ``aircraft:<aircraft>``, ``group:<group>``) -> method
-        (member id or ``bank``) -> the scorer's dict.
+        Subset (``all``, each split present, ``aircraft:<aircraft>``, ``group:<group>``, ``phase:<phase>``:
+        the phase's fault-free flights) -> method (member id or ``bank``) -> the scorer's dict.
     not_scored : list of dict
         Cases interrupted, timed out or failed (case, status, reason): not scored.
     departed : list of dict
@@ -154,6 +154,9 @@ def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
     subsets = {"all": truths} | {sp: [t for t in truths if t.split == sp] for sp in ("train", "validation", "test")}
     subsets |= {f"aircraft:{a}": [t for t in truths if t.aircraft == a] for a in sorted({t.aircraft for t in truths})}
     subsets |= {f"group:{g}": [t for t in truths if t.group == g] for g in dict.fromkeys(t.group for t in truths)}
+    phase = {c.case: c.phase for c in suite.cases}
+    subsets |= {f"phase:{p}": [t for t in truths if phase[t.case] == p and not t.windows_s]  # fault-free flights
+                for p in dict.fromkeys(phase[t.case] for t in truths)}
     for sp, ts in subsets.items():
         if not ts:
             continue
