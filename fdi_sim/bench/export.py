@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from fdi_sim.bench.errors import BenchError
+from fdi_sim.bench.suite import Case
 from fdi_sim.scoring import GRID_HZ, CaseOutput, CaseTruth
 
 SCHEMA_VERSION = 1
@@ -60,6 +61,19 @@ HASH_KEY = b"fdi_bench.suite_hash"
 GRID_TOPICS = ("/sensors/", "/commands/", "/fdi/")
 #: a time this far past the end of the flight is still inside it [s] (the log's last sample)
 T_TOL_S = 1e-6
+
+
+#: the run statuses a benchmark scores: completed, and departed up to the departure (fdi_sim.bench.score)
+SCORED_STATUSES = ("completed", "diverged")
+
+
+def case_truth(case: Case, record: Mapping[str, Any]) -> CaseTruth:
+    """A flown case's label: the injector's windows (clipped to the flight's end), arming and end."""
+    t_end = float(record["t_end_s"])
+    windows = tuple((float(a), min(float(b), t_end)) for f in record.get("faults", []) for a, b in f.get("windows_s", [])
+                    if float(a) <= t_end)
+    return CaseTruth(case.case, case.aircraft, case.group, case.split, case.fault_type, case.target, case.size,
+                     case.size_rank, tuple(sorted(windows)), float(record.get("arm_s") or 0.0), t_end, case.negative)
 
 
 def write_cases_file(out_dir: Path, suite: Any) -> None:
@@ -108,7 +122,6 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from fdi_sim.bench.score import SCORED_STATUSES, case_truth
     from fdi_sim.flightlog import VectorTopic, read_log
     from fdi_sim.scoring import sample_grid
     from fdi_sim.study.execute import load_records
@@ -218,9 +231,7 @@ def export(results_dir: str | Path, out_dir: str | Path, *, grid_hz: float = GRI
     return ExportOutcome(out, len(case_rows), skipped, len(writers), grid_rows, size)
 
 
-def _case_obj(c: Mapping[str, Any]) -> Any:
-    from fdi_sim.bench.suite import Case
-
+def _case_obj(c: Mapping[str, Any]) -> Case:
     return Case(int(c["index"]), c["case"], c["aircraft"], c["group"], c["phase"], c["split"], c["fault_type"],
                 c["target"], c["size"], int(c["size_rank"]), c["negative"], float(c["duration_s"]), "{}", "{}")
 

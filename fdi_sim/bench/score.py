@@ -14,7 +14,6 @@ The definitions are :mod:`fdi_sim.scoring`'s.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,24 +21,11 @@ from typing import Any
 import numpy as np
 
 from fdi_sim.bench.errors import BenchError
+from fdi_sim.bench.export import SCORED_STATUSES, case_truth
 from fdi_sim.bench.run import SuiteStudy
-from fdi_sim.bench.suite import Case
 from fdi_sim.scoring import CaseOutput, CaseTruth, score_suite
 
 BANK = "bank"
-#: the run statuses a benchmark scores (module docstring)
-SCORED_STATUSES = ("completed", "diverged")
-
-
-def case_truth(case: Case, record: Mapping[str, Any]) -> CaseTruth:
-    """A flown case's label: the injector's windows (clipped to the flight's end), arming and end."""
-    t_end = float(record["t_end_s"])
-    windows = tuple((float(a), min(float(b), t_end)) for f in record.get("faults", []) for a, b in f.get("windows_s", [])
-                    if float(a) <= t_end)
-    return CaseTruth(case.case, case.aircraft, case.group, case.split, case.fault_type, case.target, case.size,
-                     case.size_rank, tuple(sorted(windows)), float(record.get("arm_s") or 0.0), t_end, case.negative)
-
-
 def case_outputs(log_path: Path) -> dict[str, CaseOutput]:
     """Per member id, and :data:`BANK`, the method's output on one flown case (module docstring)."""
     from fdi_sim.flightlog import read_log
