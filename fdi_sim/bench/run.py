@@ -152,7 +152,7 @@ def suite_study(suite: Suite, bank: BenchBank, cases: Sequence[Case], *, full_lo
     what a learned detector trains on; a folder of its own)."""
     if not cases:
         raise BenchError(suite.source, "--split / --group", "the selection holds no case",
-                         "widen it (`fdi-sim bench run --list` shows the groups and splits)")
+                         "widen it (`fdi-sim bench list` shows the groups and splits)")
     model = StudyModel(kind="study", name=f"{suite.name}.{bank.slug}"[:100],
                        description=f"{suite.name} flown with {bank.name}", scenario="(suite)", seed=suite.model.seed,
                        runs=len(suite.cases), duration_s=max(c.duration_s for c in suite.cases),
