@@ -10,9 +10,9 @@ same code resumes an interrupted regeneration without flying a case twice.
 
 Banks and selections (:data:`BANKS`): the two default banks (one per aircraft, the ``default`` bank
 flies each case's own) on the whole suite; every registered detector side by side on the F-16's
-test split (its designs train all sixteen members, about 90 s of a worker per design, and its
-per-sample Python members make the DHC-6's 600 s flights slow; the cost block gives the measured
-rates), with the selection in the table's caption.
+test split (its designs train every member, and its per-sample Python members make the DHC-6's
+600 s flights slow; the cost block gives the measured rates), with the selection in the table's
+caption.
 """
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from fdi_sim.stamp import inputs_digest, make_stamp, replace_block
+from fdi_sim.units import S_PER_H
 
 MD = ROOT / "docs" / "bench.md"
 COMMAND = "python docs/make_bench_tables.py --out-root DIR --workers 2"
@@ -45,8 +46,7 @@ BANKS: tuple[tuple[str, dict, str], ...] = (
     ("default", {}, "the whole suite"),
     ("every-detector", {"split": "test", "aircraft": "f16"},
      ("the F-16's test split (every registered detector side by side, thresholds trained at the same design "
-      "points, reconfiguration off; the DHC-6's half is not flown yet: its 600 s flights with the per-sample "
-      "Python members ran at about 2 cases a minute on 2 workers)")),
+      "points, reconfiguration off; the DHC-6's half is not flown yet)")),
 )
 
 
@@ -100,27 +100,28 @@ def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict
                      "wall_s_sum": sum(float(r.get("wall_s", 0.0)) for r in recs),
                      "flight_h": sum(float(r.get("flight_h", 0.0)) for r in recs),
                      "this_call": {"flown": o.flown, "wall_s": time.perf_counter() - t0, "flight_h": o.flight_h},
-                     "calls": read_calls(folder)}
+                     "calls": read_calls(folder), "design_far_per_h": float(bank.fdi["far_per_h"]),
+                     "members": len(bank.detectors) or "default"}
     return out
 
 
 def _leaderboard(flown: dict[str, dict]) -> str:
-    from fdi_sim.bench.leaderboard import ALFA_RLS, Row, leaderboard_markdown
+    from fdi_sim.bench.leaderboard import (
+        ALFA_RLS,
+        leaderboard_markdown,
+        rank,
+        result_rows,
+    )
 
     parts = []
     for name, d in flown.items():
         r = d["result"]
-        rows = []
         subsets = [k for k in r["scored"] if k.startswith("aircraft:")] if name == "default" else ["all"]
-        for sub in subsets:
-            ac = {"aircraft:f16": "F-16", "aircraft:DHC6": "DHC-6"}.get(sub, "")
-            for m, sc in r["scored"][sub].items():
-                label = (f"default bank, {ac}" if m == "bank" else f"{m} ({ac} default bank)") if name == "default" \
-                    else ("all detectors (OR)" if m == "bank" else m)
-                rows.append(Row(label, r["bank"], r["suite"], r["suite_hash"], sub, sc))
-        rows.sort(key=lambda x: (-(x.scores["alfa"].get("f1") or 0.0), -(x.scores["event"].get("f1") or 0.0)))
+        rows = rank([row for sub in subsets for row in result_rows(r, sub)])
         nc, dep = r["not_scored"], r["departed"]
-        parts += [f"**{'Default banks' if name == 'default' else 'Every registered detector'}**, {d['caption']}: "
+        parts += [f"**{'Default banks' if name == 'default' else 'Every registered detector'}**, {d['caption']}; "
+                  f"design rate {d['design_far_per_h']:g} false alarms per flight hour per bank, split over its "
+                  f"{d['members']} members: "
                   f"{r['cases']} cases, {r['flight_h']:.1f} flight h scored; {len(dep)} departed (scored up to the "
                   f"departure: {_departures(dep)})"
                   + (f"; {len(nc)} not scored ({', '.join(sorted({x['status'] for x in nc}))}: "
@@ -136,7 +137,8 @@ def _leaderboard(flown: dict[str, dict]) -> str:
 def _by_group(flown: dict[str, dict]) -> str:
     """The default banks per suite group: where the false alarms and the detections are."""
     r = flown["default"]["result"]
-    lines = [("| group | aircraft | cases | exposure h | false alarms | per h [95 %] | faults detected [95 %] | "
+    lines = [f"Design rate {flown['default']['design_far_per_h']:g} false alarms per flight hour per bank.", "",
+             ("| group | aircraft | cases | exposure h | false alarms | per h [95 %] | faults detected [95 %] | "
               "delay median [s] | isolation right |"), "|---|---|---|---|---|---|---|---|---|"]
     for key, methods in r["scored"].items():
         if not key.startswith("group:") or "bank" not in methods:
@@ -177,9 +179,9 @@ def _cost(flown: dict[str, dict], workers: int) -> str:
               "calls that flew: cases, flight h, wall [s] (designs included), flight h per hour |"),
              "|---|---|---|---|---|---|"]
     for name, d in flown.items():
-        rate = d["flight_h"] / (d["wall_s_sum"] / 3600.0) if d["wall_s_sum"] > 0 else None
+        rate = d["flight_h"] / (d["wall_s_sum"] / S_PER_H) if d["wall_s_sum"] > 0 else None
         calls = "; ".join(f"{c['flown']}, {c['flight_h']:.1f}, {c['wall_s']:.0f}, "
-                          f"{c['flight_h'] / (c['wall_s'] / 3600.0):.0f} ({c['workers'] or 'all'} workers"
+                          f"{c['flight_h'] / (c['wall_s'] / S_PER_H):.0f} ({c['workers'] or 'all'} workers"
                           f"{', interrupted' if c['interrupted'] else ''})" for c in d["calls"])
         lines.append(f"| {name} | {d['result']['cases']} | {d['flight_h']:.1f} | {d['wall_s_sum']:.0f} | "
                      f"{'-' if rate is None else f'{rate:.0f}'} | {calls or 'not recorded (flown before the calls log)'} |")

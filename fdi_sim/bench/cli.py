@@ -9,6 +9,7 @@ from typing import Any
 
 # one JSON fallback for numpy values in both commands
 from fdi_sim.study.cli import _jsonable
+from fdi_sim.units import S_PER_H
 
 #: the results of a benchmark run, written into its folder
 RESULT_FILE = "bench.json"
@@ -140,7 +141,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                             f"{res.flight_h:.2f} flight h scored"))
         if o.flown:
             print(f"this call flew {o.flown} cases ({o.flight_h:.2f} flight h) in {o.wall_s:.0f} s: "
-                  f"{o.flight_h / (o.wall_s / 3600.0):.0f} flight h per hour")
+                  f"{o.flight_h / (o.wall_s / S_PER_H):.0f} flight h per hour")
         print(f"results    {out / RESULT_FILE}")
     return 0
 

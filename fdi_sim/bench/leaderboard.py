@@ -67,22 +67,40 @@ def leaderboard_rows(folders: Sequence[Path], split: str = "all") -> list[Row]:
         if split not in d["scored"]:
             raise BenchError(str(p), "--split", f"split {split!r} was not scored (have {sorted(d['scored'])})",
                              "give a scored split")
-        for m, s in d["scored"][split].items():
-            name = ("default bank" if m == "bank" else m) if d["bank"] == "default" else m
-            rows.append(Row(name if d["bank"] != "default" or m == "bank" else f"{m} (in the default bank)",
-                            d["bank"], d["suite"], d["suite_hash"], split, s))
+        rows += result_rows(d, split)
     if len(hashes) > 1:
         raise BenchError(", ".join(map(str, folders)), "", f"results of {len(hashes)} different suites",
                          "rank the results of one suite version")
 
-    def key(r: Row) -> tuple[float, float]:
-        return (-(r.scores["alfa"].get("f1") or 0.0), -(r.scores["event"].get("f1") or 0.0))
+    return rank(rows)
 
-    return sorted(rows, key=key)
+
+#: how a subset of the default banks' results is named in a row
+_AIRCRAFT = {"aircraft:f16": "F-16", "aircraft:DHC6": "DHC-6"}
+
+
+def result_rows(d: dict[str, Any], subset: str) -> list[Row]:
+    """One row per method of a ``bench.json`` (``d``) on ``subset``: the default banks' members named
+    with their aircraft's bank, the OR of a detectors bank as ``all detectors (OR)``."""
+    ac = _AIRCRAFT.get(subset, "")
+    out = []
+    for m, s in d["scored"][subset].items():
+        if d["bank"] == "default":
+            where = f", {ac}" if ac else ""
+            label = f"default bank{where}" if m == "bank" else f"{m} ({ac + ' ' if ac else ''}default bank)"
+        else:
+            label = "all detectors (OR)" if m == "bank" else m
+        out.append(Row(label, d["bank"], d["suite"], d["suite_hash"], subset, s))
+    return out
+
+
+def rank(rows: list[Row]) -> list[Row]:
+    """By the ALFA criterion's F1, then the event-level F1 (module docstring)."""
+    return sorted(rows, key=lambda r: (-(r.scores["alfa"].get("f1") or 0.0), -(r.scores["event"].get("f1") or 0.0)))
 
 
 def _f(x: Any, spec: str) -> str:
-    return "-" if x is None else format(x, spec)
+    return "-" if x is None else format(x, spec)  # (cli.py's _f also pads the dash to the column)
 
 
 def _ci(p: dict[str, Any]) -> str:

@@ -106,10 +106,6 @@ class SuiteStudy(Study):
     selected: tuple[int, ...] = field(default=())
 
     @property
-    def name(self) -> str:
-        return self.model.name
-
-    @property
     def n_runs(self) -> int:
         return len(self._suite.cases)
 

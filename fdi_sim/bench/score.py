@@ -24,6 +24,7 @@ from fdi_sim.bench.errors import BenchError
 from fdi_sim.bench.export import SCORED_STATUSES, case_truth
 from fdi_sim.bench.run import SuiteStudy
 from fdi_sim.scoring import CaseOutput, CaseTruth, score_suite
+from fdi_sim.units import S_PER_H
 
 BANK = "bank"
 def case_outputs(log_path: Path) -> dict[str, CaseOutput]:
@@ -153,4 +154,4 @@ def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
                 scored[sp][ident] = score_suite(mine, outs) | {"cases_scored": len(mine), "cases_without": len(ts) - len(mine)}
     assert study.bank is not None
     return BenchResult(suite.name, suite.hash, study.bank.name, len(study.selected), scored, bad, departed,
-                       sum(t.t_end_s for t in truths) / 3600.0)
+                       sum(t.t_end_s for t in truths) / S_PER_H)

@@ -39,6 +39,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from fdi_sim.bench.errors import BenchError
 from fdi_sim.errors import ScenarioError
+from fdi_sim.units import S_PER_H
 
 #: the shipped suites' folder
 SUITES_DIR = Path(__file__).resolve().parents[1] / "_bench"
@@ -158,7 +159,7 @@ class Suite:
 
     def flight_h(self, cases: tuple[Case, ...] | None = None) -> float:
         """Planned flight hours of ``cases`` (default: all) [h]."""
-        return sum(c.duration_s for c in (self.cases if cases is None else cases)) / 3600.0
+        return sum(c.duration_s for c in (self.cases if cases is None else cases)) / S_PER_H
 
     def select(self, *, split: str | None = None, groups: tuple[str, ...] = (), aircraft: str | None = None,
                per_group: int | None = None) -> tuple[Case, ...]:
@@ -247,11 +248,8 @@ def load_suite(ref: str = "fdi-bench-v1", *, check_frozen: bool = True) -> Suite
 
 def _build_cases(model: SuiteModel, path: Path) -> tuple[Case, ...]:
     from fdi_sim.scenario import load
-    from fdi_sim.scenario.loader import from_dict
     from fdi_sim.study.spec import (
-        _set_dotted,
         check_distribution,
-        draw,
         resolve_scenario,
     )
 
@@ -297,13 +295,16 @@ def _build_cases(model: SuiteModel, path: Path) -> tuple[Case, ...]:
             split_of = {int(r): SPLITS[0] if k < n_train else SPLITS[1] if k < n_train + n_val else SPLITS[2]
                         for k, r in enumerate(order)}
             for r in range(g.runs):
-                cases.append(_case(model, src, gi, g, si, value, r, split_of[r], bases, len(cases), from_dict,
-                                   draw, _set_dotted))
+                cases.append(_case(model, src, gi, g, si, value, r, split_of[r], bases, len(cases)))
     return tuple(cases)
 
 
 def _case(model: SuiteModel, src: str, gi: int, g: GroupModel, si: int, value: float | None, r: int, split: str,
-          bases: dict[str, dict[str, Any]], index: int, from_dict: Any, draw: Any, set_dotted: Any) -> Case:
+          bases: dict[str, dict[str, Any]], index: int) -> Case:
+    from fdi_sim.scenario.loader import from_dict
+    from fdi_sim.study.spec import _set_dotted as set_dotted
+    from fdi_sim.study.spec import draw
+
     s_sample, s_flight = np.random.SeedSequence([model.seed, gi, si, r]).spawn(2)
     rng = np.random.default_rng(s_sample)
     seed = int(s_flight.generate_state(1, np.uint64)[0] >> np.uint64(1))
