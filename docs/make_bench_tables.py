@@ -72,6 +72,7 @@ def _suite_table() -> str:
 
 def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict]:
     from fdi_sim import registry
+    from fdi_sim.bank.members import DEFAULT_BANKS
     from fdi_sim.bench.cli import read_calls, record_call
     from fdi_sim.bench.run import bench_bank, fly_bench, suite_study
     from fdi_sim.bench.score import score_folder
@@ -101,7 +102,8 @@ def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict
                      "flight_h": sum(float(r.get("flight_h", 0.0)) for r in recs),
                      "this_call": {"flown": o.flown, "wall_s": time.perf_counter() - t0, "flight_h": o.flight_h},
                      "calls": read_calls(folder), "design_far_per_h": float(bank.fdi["far_per_h"]),
-                     "members": len(bank.detectors) or "default"}
+                     "members": len(bank.detectors) or "/".join(sorted({str(len(v)) for v in DEFAULT_BANKS.values()}))
+                     + ("" if bank.detectors else " per aircraft")}
     return out
 
 
@@ -121,7 +123,7 @@ def _leaderboard(flown: dict[str, dict]) -> str:
         nc, dep = r["not_scored"], r["departed"]
         parts += [f"**{'Default banks' if name == 'default' else 'Every registered detector'}**, {d['caption']}; "
                   f"design rate {d['design_far_per_h']:g} false alarms per flight hour per bank, split over its "
-                  f"{d['members']} members: "
+                  f"members ({d['members']}): "
                   f"{r['cases']} cases, {r['flight_h']:.1f} flight h scored; {len(dep)} departed (scored up to the "
                   f"departure: {_departures(dep)})"
                   + (f"; {len(nc)} not scored ({', '.join(sorted({x['status'] for x in nc}))}: "
