@@ -273,6 +273,8 @@ def read_scores(path: str | Path, truths: Sequence[CaseTruth], suite_hash: str, 
 
     p = Path(path)
     src = str(p)
+    if not p.is_file():
+        raise BenchError(src, "--scores", "no such file", "give the path of a Parquet (.parquet) or CSV (.csv) scores file")
     try:
         if p.suffix.lower() == ".csv":
             table = pcsv.read_csv(p, convert_options=pcsv.ConvertOptions(
