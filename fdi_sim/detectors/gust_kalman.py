@@ -279,11 +279,22 @@ def _signatures(m: LinearModel, K: NDArray[np.float64], ctrl: Sequence[int], W: 
     return tuple(hyps), np.asarray(rows)
 
 
+def _on_circle(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Angles [rad] in [-pi, pi); those already there are returned as they are (the same bits: a
+    flight that never wraps gives the numbers it gave before the wrap was added)."""
+    out = a.copy()
+    off = (out < -math.pi) | (out >= math.pi)
+    out[off] = (out[off] + math.pi) % (2.0 * math.pi) - math.pi
+    return out
+
+
 def innovations(design: GustKalmanDesign, samples: Samples) -> NDArray[np.float64]:
     """Run the filter over samples; return the innovations (N, p).
 
     ``nu_j = dy_j - C x_j - D du_j``, ``x_{j+1} = A (x_j + K_j nu_j) + B du_j``; invalid
-    measurements (dropouts) enter as zero innovation for that output.
+    measurements (dropouts) enter as zero innovation for that output; the heading's innovation is
+    wrapped to [-pi, pi), and so is the heading state (a cyclic coordinate: after a full orbit it is
+    where it started).
     """
     m = design.model
     if tuple(samples.output_names) != tuple(m.output_names):
@@ -296,11 +307,15 @@ def innovations(design: GustKalmanDesign, samples: Samples) -> NDArray[np.float6
     x = np.zeros(m.n_states)
     out = np.empty((samples.n, m.n_outputs))
     du, dy, ok = samples.du, samples.dy, samples.valid
+    wrap = np.array([is_wrapped(nm) for nm in m.output_names])
+    wrap_x = np.array([is_wrapped(nm) for nm in m.state_names])
     for j in range(samples.n):
         nu = dy[j] - C @ x - D @ du[j]
+        nu[wrap] = _on_circle(nu[wrap])  # a heading's innovation is an angle
         nu = np.where(ok[j], nu, 0.0)
         out[j] = nu
         x = A @ (x + G[min(j, J)] @ nu) + B @ du[j]
+        x[wrap_x] = _on_circle(x[wrap_x])  # the heading state: on the circle
     return out
 
 
@@ -429,6 +444,7 @@ class GustKalmanDetector:
         self._u0 = np.asarray(m.u0, dtype=float)[cols].copy()
         self._y0 = np.asarray(m.y0, dtype=float)
         self._wrap = np.array([is_wrapped(nm) for nm in m.output_names])
+        self._wrap_x = np.array([is_wrapped(nm) for nm in m.state_names])
         self._cols = np.asarray(cols)
         self._k0 = settle_samples(d)
         self._J = len(d.gains) - 1
@@ -448,8 +464,11 @@ class GustKalmanDetector:
         dy = np.asarray(y, dtype=float) - self._y0
         dy[self._wrap] = (dy[self._wrap] + math.pi) % (2.0 * math.pi) - math.pi
         ok = np.isfinite(dy)
-        nu = np.where(ok, dy - self._C @ self._x - self._D @ du, 0.0)
+        nu = dy - self._C @ self._x - self._D @ du
+        nu[self._wrap] = _on_circle(nu[self._wrap])  # as innovations()
+        nu = np.where(ok, nu, 0.0)
         self._x = self._A @ (self._x + d.gains[min(self._j, self._J)] @ nu) + self._B @ du
+        self._x[self._wrap_x] = _on_circle(self._x[self._wrap_x])  # as innovations()
         self._buf[self._j % d.window_n] = nu
         self._j += 1
         if self._L is None or self._j <= self._k0:

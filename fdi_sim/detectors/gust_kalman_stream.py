@@ -7,9 +7,11 @@ schedule point ``c`` (:mod:`fdi_sim.detectors.scheduled`)::
     schedule s_j = s_{j-1} + (y_s,j - s_{j-1}) / (tau rate)      (measured h, vc, low-passed; a
              missing or excluded one replaced by the filter's last prediction of it)
     switch   i = argmin_i d_i(s_j);  if d_c - d_i > hysteresis:  x += x0_c - x0_i,  c = i
+             (the heading state's difference wrapped to [-pi, pi): one heading, however its trim reads)
     predict  yhat_j = y0_c + C_c x + D_c (u_j - u0_c)
-    innovate nu_j = y_j - yhat_j          (0 for a missing or excluded measurement)
-    update   x = A_c (x + K_c(j) nu_j) + B_c (u_j - u0_c)
+    innovate nu_j = y_j - yhat_j          (0 for a missing or excluded measurement; the heading's
+             wrapped to [-pi, pi): after a full orbit the filter's heading state is 2 pi on)
+    update   x = A_c (x + K_c(j) nu_j) + B_c (u_j - u0_c)     (the heading state wrapped to [-pi, pi))
     test     m_j = (1/W) sum_{l<W} nu_{j-l},   T_j = m_j' Sigma_c^-1 m_j  vs  threshold_c
 
 (gust_kalman.py eq. for ``innovations``, ``window_means`` and ``statistic``). While
@@ -42,7 +44,7 @@ TWO_PI = 2.0 * math.pi
 
 @numba.njit(cache=True, nogil=True)
 def _process(A, B, C, D, G, u0, y0, x0, L, Si_g, g_Si_g, Si, thr, points, spacing, hyst, min_cos, wrap,
-             i_sched, k0, a_sched, s_f, x, buf, st, u, y, ok,
+             wrap_x, i_sched, k0, a_sched, s_f, x, buf, st, u, y, ok,
              out_T, out_thr, out_valid, out_hyp, out_cos, out_point, out_nu, out_yhat):  # pragma: no cover
     P, n, _ = A.shape
     p = C.shape[1]
@@ -80,7 +82,13 @@ def _process(A, B, C, D, G, u0, y0, x0, L, Si_g, g_Si_g, Si, thr, points, spacin
                     dc = d
             if best != c and dc - dbest > hyst:
                 for a in range(n):
-                    x[a] += x0[c, a] - x0[best, a]
+                    dx0 = x0[c, a] - x0[best, a]
+                    if wrap_x[a] and not -math.pi <= dx0 < math.pi:
+                        # a heading trim is an angle: 0 and 2 pi are one trim (JSBSim reports psi in
+                        # [0, 2 pi), so a trim a hair left of north reads 6.2832); carrying the
+                        # unwrapped difference put a 2 pi step into the heading innovation
+                        dx0 = (dx0 + math.pi) % TWO_PI - math.pi
+                    x[a] += dx0
                 c = best
                 st[1] = c
         # --- filter --------------------------------------------------------------------------
@@ -103,6 +111,10 @@ def _process(A, B, C, D, G, u0, y0, x0, L, Si_g, g_Si_g, Si, thr, points, spacin
                 if wrap[r]:
                     dy = (dy + math.pi) % TWO_PI - math.pi
                 nu[r] = dy - pred
+                if wrap[r] and not -math.pi <= nu[r] < math.pi:
+                    # an angle's innovation (the filter's heading may have turned past pi); wrapped
+                    # only when outside, so that a flight that never wraps keeps its bits
+                    nu[r] = (nu[r] + math.pi) % TWO_PI - math.pi
             else:
                 nu[r] = 0.0
             out_nu[j, r] = nu[r]
@@ -117,6 +129,8 @@ def _process(A, B, C, D, G, u0, y0, x0, L, Si_g, g_Si_g, Si, thr, points, spacin
                 acc += A[c, a, b] * xk[b]
             for b in range(mc):
                 acc += B[c, a, b] * du[b]
+            if wrap_x[a] and not -math.pi <= acc < math.pi:  # the heading deviation: on the circle
+                acc = (acc + math.pi) % TWO_PI - math.pi
             x[a] = acc
         slot = jj % W
         for r in range(p):
@@ -235,6 +249,7 @@ class GustKalmanStream:
             self._g_Si_g[i] = np.einsum("hwp,hwp->hw", self._Si_g[i], d.signatures)
         self._thr = schedule.thresholds.astype(float)
         self._wrap = np.array([is_wrapped(nm) for nm in self.output_names])
+        self._wrap_x = np.array([is_wrapped(nm) for nm in m0.state_names])  # the heading state
         self._i_sched = np.array([self.output_names.index(s) for s in SCHEDULE_SIGNALS], dtype=np.int64)
         self._k0 = settle_samples(d0)
         self.window_n = d0.window_n
@@ -336,7 +351,7 @@ class GustKalmanStream:
         and the predicted measurement (the filter's estimate of each sensor, in its units)."""
         _process(self._A, self._B, self._C, self._D, self._G, self._u0, self._y0, self._x0, self._L, self._Si_g,
                  self._g_Si_g, self._Si, self._thr, self.schedule.points, self.schedule.spacing,
-                 float(self.schedule.hysteresis), self.min_cosine, self._wrap, self._i_sched, self._k0,
+                 float(self.schedule.hysteresis), self.min_cosine, self._wrap, self._wrap_x, self._i_sched, self._k0,
                  self._a_sched, self._s_f, self._x, self._buf, self._st, u, y, ok,
                  out_statistic, out_threshold, out_valid, out_hypothesis, out_cosine, out_point, out_innovation,
                  out_estimate)

@@ -129,3 +129,75 @@ def test_schedule_follows_the_filter_when_the_scheduling_sensor_is_excluded(flig
     assert np.count_nonzero(np.diff(a["point"])) >= 1 and np.count_nonzero(np.diff(b["point"])) >= 1
     err = b["yhat"][:, i_vc] - vc
     assert np.sqrt(np.mean(err[40:] ** 2)) < 3.0, np.sqrt(np.mean(err[40:] ** 2))  # kt, after the filter's start
+
+
+def _heading_as_2pi(design):
+    """The same design with its trim heading read as 2 pi on (JSBSim's psi is in [0, 2 pi): a trim
+    a hair left of north reads 6.2832 where the next node's reads 0.0)."""
+    m = design.model
+    x0 = np.asarray(m.x0, dtype=float).copy()
+    y0 = np.asarray(m.y0, dtype=float).copy()
+    x0[list(m.state_names).index("psi_rad")] += 2.0 * np.pi
+    y0[list(m.output_names).index("psi_rad")] += 2.0 * np.pi
+    return replace(design, model=replace(m, x0=x0, y0=y0))
+
+
+def test_switching_to_a_trim_heading_read_as_2pi_changes_nothing(flight):
+    """Bumpless transfer across two nodes whose trim headings are one angle written 0 and 2 pi:
+    nothing moves (fdi-bench-v1's DHC-6 descents alarmed at 6,516 x the threshold at that switch
+    before the heading's trim difference was wrapped)."""
+    det, s = flight
+    one = GustKalmanSchedule.single(det.design, det.calibration)
+    h0, _ = one.points[0]
+    y = s.dy + s.y0
+    vc = y[:, list(det.design.model.output_names).index("vc_kts")]
+    two = GustKalmanSchedule(np.array([[h0, float(np.median(vc)) - 1.0], [h0, float(np.median(vc)) + 1.0]]),
+                             np.array([2000.0, 1.0]), (det.design, _heading_as_2pi(det.design)),
+                             (det.calibration,) * 2, hysteresis=0.2)
+    a, b = _go(GustKalmanStream(one), s, [s.n]), _go(GustKalmanStream(two), s, [7] * s.n)
+    assert np.count_nonzero(np.diff(b["point"])) >= 2
+    i_psi = list(det.design.model.output_names).index("psi_rad")
+    for k in ("T", "valid", "hyp", "nu"):
+        np.testing.assert_allclose(a[k], b[k], rtol=0, atol=1e-9, err_msg=k)
+    # the estimate is the same heading, on either side of the circle
+    d = (b["yhat"][:, i_psi] - a["yhat"][:, i_psi] + np.pi) % (2 * np.pi) - np.pi
+    assert np.max(np.abs(d)) < 1e-9
+
+
+def _cyclic_heading(design):
+    """The design with the heading exactly cyclic: the linearizer's finite differences leave couplings
+    of ~1e-6 per rad from the heading to the other channels, which a state 2 pi off would show."""
+    m = design.model
+    A, C = np.asarray(m.A, dtype=float).copy(), np.asarray(m.C, dtype=float).copy()
+    i_x = list(m.state_names).index("psi_rad")
+    keep_a, keep_c = A[i_x, i_x], C[list(m.output_names).index("psi_rad"), i_x]
+    A[:, i_x] = 0.0
+    C[:, i_x] = 0.0
+    A[i_x, i_x], C[list(m.output_names).index("psi_rad"), i_x] = keep_a, keep_c
+    return replace(design, model=replace(m, A=A, C=C))
+
+
+def test_a_heading_state_a_full_turn_on_changes_no_innovation(flight):
+    """After an orbit the measured heading has wrapped; the filter's heading state is a deviation on
+    the circle and its innovation the angle between them (a 2 pi spike before): a heading state a
+    full turn on changes nothing, in the streaming kernel and in the whole-flight path alike."""
+    from fdi_sim.detectors.gust_kalman import innovations
+
+    det, s = flight
+    design = _cyclic_heading(det.design)
+    st = GustKalmanStream(GustKalmanSchedule.single(design, det.calibration))
+    a = _go(st, s, [s.n])
+    i_x = list(design.model.state_names).index("psi_rad")
+    N, p = s.n, st.n_outputs
+    b = dict(T=np.empty(N), thr=np.empty(N), valid=np.empty(N, bool), hyp=np.empty(N, np.int64), cos=np.empty(N),
+             point=np.empty(N, np.int64), nu=np.empty((N, p)), yhat=np.empty((N, p)))
+    st.reset()
+    st._x[i_x] += 2.0 * np.pi  # the state a full orbit on
+    st.process(s.du + s.u0, s.dy + s.y0, s.valid, *b.values())
+    for k in ("T", "valid", "hyp", "nu"):
+        np.testing.assert_allclose(a[k], b[k], rtol=1e-9, atol=1e-9, err_msg=k)
+    assert -np.pi <= st._x[i_x] < np.pi
+    # the whole-flight path: a measured heading a full turn on is the same innovation
+    dy = s.dy.copy()
+    dy[:, list(design.model.output_names).index("psi_rad")] += 2.0 * np.pi
+    np.testing.assert_allclose(innovations(design, replace(s, dy=dy)), innovations(design, s), atol=1e-9)
