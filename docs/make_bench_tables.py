@@ -34,13 +34,14 @@ SUITE_INPUTS = ("fdi_sim/_bench", "fdi_sim/bench/suite.py", "docs/make_bench_tab
 CODE = ("aircraft", "scenarios", "fdi_sim/_bench", "fdi_sim/bench", "fdi_sim/decision", "fdi_sim/bank",
         "fdi_sim/detectors", "fdi_sim/training", "fdi_sim/sensors", "fdi_sim/faults", "fdi_sim/sim", "fdi_sim/pilot",
         "fdi_sim/linear", "fdi_sim/scenario", "fdi_sim/study/execute.py", "fdi_sim/study/spec.py",
-        "docs/make_bench_tables.py")
+        "fdi_sim/scoring.py", "docs/make_bench_tables.py")
 #: what the flights depend on (the folders are keyed by its digest): CODE without the scoring, the rendering
 #: and the study executor (whose records are checked by tests/study and tests/bench: resume, 1 worker = 2)
 FLIGHT = tuple(x for x in CODE if x not in ("fdi_sim/bench", "fdi_sim/decision", "fdi_sim/study/execute.py",
-                                            "fdi_sim/study/spec.py", "docs/make_bench_tables.py")) + (
+                                            "fdi_sim/study/spec.py", "fdi_sim/scoring.py",
+                                            "docs/make_bench_tables.py")) + (
     "fdi_sim/bench/run.py", "fdi_sim/bench/suite.py") + tuple(
-    f"fdi_sim/decision/{p.name}" for p in sorted((ROOT / "fdi_sim" / "decision").glob("*.py")) if p.name != "scoring.py")
+    f"fdi_sim/decision/{p.name}" for p in sorted((ROOT / "fdi_sim" / "decision").glob("*.py")))
 #: (bank name, selection keywords of Suite.select, what the caption says)
 BANKS: tuple[tuple[str, dict, str], ...] = (
     ("default", {}, "the whole suite"),
