@@ -64,8 +64,13 @@ def _one(ac: str, bank: str, detector: str | None):
 
 def measure(ac: str, make) -> tuple[float, float, str]:
     """(ratio to bare, extra us per step, note) of the scenario ``make(T)`` on aircraft ``ac``."""
+    from fdi_sim.errors import DesignError
+
     with tempfile.TemporaryDirectory() as d:
-        warm = fly(make(2.0), d, progress=False, force=True)  # designs, training, compilation (cached)
+        try:
+            warm = fly(make(2.0), d, progress=False, force=True)  # designs, training, compilation (cached)
+        except DesignError as exc:  # no member designable on this aircraft (engine gauges on a single engine)
+            return float("nan"), float("nan"), str(exc).rsplit("skipped, ", 1)[-1]
         members = warm.summary.fdi_detectors
         sc = make(T_S)
         bare, loop = [], []
@@ -87,11 +92,15 @@ def main() -> int:
         ("every", None)]
     stamp = make_stamp("bench-member-cost", "python docs/make_member_cost_table.py", INPUTS)
     cells: dict[tuple[int, str], str] = {}
+    why_not: list[str] = []
     for ac in CASES:
         for k, (bank, det) in enumerate(rows):
             ratio, us, note = measure(ac, _one(ac, bank, det))
-            cells[(k, ac)] = ("cannot be designed here" if note else f"{ratio:.2f} / {us:,.0f}")
-            print(f"{ac} {det or bank}: {cells[(k, ac)]} {note}", file=sys.stderr, flush=True)
+            cells[(k, ac)] = ("cannot be designed here" if note else f"{ratio:.2f} / {us:.1f}")
+            why = f" ({note})" if note else ""
+            if note:
+                why_not.append(f"{det} on the {ac}: {note}")
+            print(f"{ac} {det or bank}: {cells[(k, ac)]}{why}", file=sys.stderr, flush=True)
     label = {"none": "the loop, no bank", "default": "the aircraft's default bank", "every": "every detector together"}
     lines = ["| bank | " + " | ".join(f"{ac}: ratio to bare / us per step" for ac in CASES) + " |",
              "|---|" + "---|" * len(CASES)]
@@ -100,6 +109,7 @@ def main() -> int:
     lines += ["", f"{T_S:g} s flights in moderate turbulence as a study logs them (FDI topics, no residuals), best of "
               f"{REPEATS}, interleaved with bare JSBSim in the same process; a member's own cost is its extra time per "
               "step minus the first row's; on " + f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores."]
+    lines += ["", "Not designable here (the design's own words):"] + [f"- {w}" for w in why_not] if why_not else []
     MD.write_text(replace_block(MD.read_text(), stamp, "\n".join(lines)))
     print(f"wrote the bench-member-cost block of {MD}")
     return 0
