@@ -167,6 +167,17 @@ def _by_group(flown: dict[str, dict]) -> str:
             a = s["alfa"]
             lines.append(f"| {key.split(':', 1)[1]} | {s['cases']} | {s['exposure_h']:.2f} | {s['false_alarms']} | {far} | "
                          f"{a['fp']} |")
+    lines += ["", ("Every case of each aircraft (fault cases outside their fault windows included) by the turbulence it "
+                   "flew in, which the bank is not told, and by how the flight ended (a departed flight is scored up to "
+                   "its departure):"), "",
+              "| aircraft | air or ending | cases | exposure h | false alarms | per h [95 %] |", "|---|---|---|---|---|---|"]
+    for key, methods in r["scored"].items():
+        if key.startswith(("air:", "ended:")) and "bank" in methods:
+            s = methods["bank"]
+            _, ac, what = key.split(":")
+            far = "-" if s["far_per_h"] is None else \
+                f"{s['far_per_h']:.3f} [{s['far_per_h_ci'][0]:.3f}, {s['far_per_h_ci'][1]:.3f}]"
+            lines.append(f"| {ac} | {what} | {s['cases']} | {s['exposure_h']:.2f} | {s['false_alarms']} | {far} |")
     return "\n".join(lines)
 
 

@@ -78,8 +78,10 @@ class BenchResult:
     cases : int
         Cases asked for.
     scored : dict
-        Subset (``all``, each split present, ``aircraft:<aircraft>``, ``group:<group>``, ``phase:<phase>``:
-        the phase's fault-free flights) -> method (member id or ``bank``) -> the scorer's dict.
+        Subset -> method (member id or ``bank``) -> the scorer's dict. Subsets: ``all``, each split
+        present, ``aircraft:<aircraft>``, ``group:<group>``, ``phase:<phase>`` (the phase's fault-free
+        flights), ``air:<aircraft>:<turbulence>`` and ``ended:<aircraft>:<completed|departed>`` (every
+        case of the aircraft, by the air it flew in and by how its flight ended).
     not_scored : list of dict
         Cases interrupted, timed out or failed (case, status, reason): not scored.
     departed : list of dict
@@ -123,6 +125,7 @@ def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
     truths: list[CaseTruth] = []
     outputs: dict[str, dict[str, CaseOutput]] = {}
     bad, departed = [], []
+    ended: dict[str, str] = {}  # case -> "completed" or "departed"
     for i in study.selected:
         r, case = recs[i], suite.cases[i]
         if r.get("status") not in SCORED_STATUSES:
@@ -133,6 +136,7 @@ def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
                              "delete the record and run `fdi-sim bench run` again")
         if r["status"] == "diverged":
             departed.append({"case": case.case, "reason": r.get("reason", "")})
+        ended[case.case] = "departed" if r["status"] == "diverged" else "completed"
         truths.append(case_truth(case, r))
         for ident, o in case_outputs(out / "runs" / r["log"]).items():
             outputs.setdefault(ident, {})[case.case] = o
@@ -144,6 +148,14 @@ def score_folder(study: SuiteStudy, out_dir: str | Path) -> BenchResult:
     phase = {c.case: c.phase for c in suite.cases}
     subsets |= {f"phase:{p}": [t for t in truths if phase[t.case] == p and not t.windows_s]  # fault-free flights
                 for p in dict.fromkeys(phase[t.case] for t in truths)}
+    # per aircraft, by the air the case flew in and by how it ended: where a bank's false alarms are
+    # (the bank is not told the turbulence level; a departed flight is scored up to its departure)
+    air = {c.case: str(json.loads(c.params).get("atmosphere.turbulence", "")) for c in suite.cases}
+    for a in sorted({t.aircraft for t in truths}):
+        mine = [t for t in truths if t.aircraft == a]
+        subsets |= {f"air:{a}:{lvl}": [t for t in mine if air[t.case] == lvl]
+                    for lvl in ("none", "light", "moderate", "severe")}
+        subsets |= {f"ended:{a}:{e}": [t for t in mine if ended[t.case] == e] for e in ("completed", "departed")}
     for sp, ts in subsets.items():
         if not ts:
             continue

@@ -231,3 +231,19 @@ def test_the_leaderboard_ranks_every_scored_method(flown, tmp_path, capsys):
     md = out.read_text()
     assert "default bank" in md and "kalman-gust-v1 (default bank)" in md and "beats ALFA" in md
     assert out.with_suffix(".html").read_text().startswith("<!doctype html>")
+
+
+def test_the_air_and_ending_subsets_partition_each_aircraft(flown):
+    """``air:<aircraft>:<level>`` and ``ended:<aircraft>:<how>`` split an aircraft's cases without
+    overlap or gap: their cases, exposures and bank false alarms add up to the aircraft's."""
+    s = score_folder(flown["study"], flown["tmp"] / "two").scored
+    whole = s["aircraft:f16"][BANK]
+    for prefix in ("air:f16:", "ended:f16:"):
+        parts = [m[BANK] for k, m in s.items() if k.startswith(prefix)]
+        assert parts, prefix
+        assert sum(p["cases"] for p in parts) == whole["cases"] == 4
+        assert sum(p["false_alarms"] for p in parts) == whole["false_alarms"]
+        assert sum(p["exposure_h"] for p in parts) == pytest.approx(whole["exposure_h"], rel=1e-12)
+    levels = {json.loads(c.params)["atmosphere.turbulence"] for c in flown["cases"]}
+    assert {k.rsplit(":", 1)[1] for k in s if k.startswith("air:f16:")} == levels
+    assert "ended:f16:departed" not in s  # no case departed: an empty subset is left out
