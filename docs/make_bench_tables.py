@@ -139,6 +139,8 @@ def _leaderboard(flown: dict[str, dict]) -> str:
 
 def _by_group(flown: dict[str, dict]) -> str:
     """The default banks per suite group: where the false alarms and the detections are."""
+    from fdi_sim.bench.leaderboard import far_cell
+
     r = flown["default"]["result"]
     lines = [f"Design rate {flown['default']['design_far_per_h']:g} false alarms per flight hour per bank.", "",
              ("| group | aircraft | cases | exposure h | false alarms | per h [95 %] | faults detected [95 %] | "
@@ -148,8 +150,7 @@ def _by_group(flown: dict[str, dict]) -> str:
             continue
         s = methods["bank"]
         ac = key.split(":", 1)[1].split("-")[0]
-        far = "-" if s["far_per_h"] is None else \
-            f"{s['far_per_h']:.3f} [{s['far_per_h_ci'][0]:.3f}, {s['far_per_h_ci'][1]:.3f}]"
+        far = far_cell(s)
         d = s["detection"]
         det = "-" if not d["faults"] else f"{d['detected']['k']}/{d['faults']} [{d['detected']['ci'][0]:.2f}, " \
                                           f"{d['detected']['ci'][1]:.2f}]"
@@ -162,8 +163,7 @@ def _by_group(flown: dict[str, dict]) -> str:
     for key, methods in r["scored"].items():
         if key.startswith("phase:") and "bank" in methods:
             s = methods["bank"]
-            far = "-" if s["far_per_h"] is None else \
-                f"{s['far_per_h']:.3f} [{s['far_per_h_ci'][0]:.3f}, {s['far_per_h_ci'][1]:.3f}]"
+            far = far_cell(s)
             a = s["alfa"]
             lines.append(f"| {key.split(':', 1)[1]} | {s['cases']} | {s['exposure_h']:.2f} | {s['false_alarms']} | {far} | "
                          f"{a['fp']} |")
@@ -175,8 +175,7 @@ def _by_group(flown: dict[str, dict]) -> str:
         if key.startswith(("air:", "ended:")) and "bank" in methods:
             s = methods["bank"]
             _, ac, what = key.split(":")
-            far = "-" if s["far_per_h"] is None else \
-                f"{s['far_per_h']:.3f} [{s['far_per_h_ci'][0]:.3f}, {s['far_per_h_ci'][1]:.3f}]"
+            far = far_cell(s)
             lines.append(f"| {ac} | {what} | {s['cases']} | {s['exposure_h']:.2f} | {s['false_alarms']} | {far} |")
     return "\n".join(lines)
 

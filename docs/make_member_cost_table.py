@@ -30,8 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests" / "benchmarks"))
 
-from bench_bank import CASES, loop_rate, scenario  # noqa: E402
-from bench_loop import bare_rate  # noqa: E402
+from bench_bank import CASES, best_rates, scenario  # noqa: E402
 
 from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 from fdi_sim.training import fly  # noqa: E402
@@ -44,43 +43,23 @@ INPUTS = ("fdi_sim/sim", "fdi_sim/bank", "fdi_sim/detectors", "fdi_sim/decision"
           "tests/benchmarks/bench_loop.py", "docs/make_member_cost_table.py")
 
 
-def _one(ac: str, bank: str, detector: str | None):
-    """``T -> scenario``: the study-mode scenario with ``bank`` (``none``, ``default``, ``every``), or
-    the every-detector set-up (thresholds trained on four 60 s flights) with one detector only."""
-    import json
+def measure(ac: str, bank: str, detector: str | None) -> tuple[float, float, str]:
+    """(ratio to bare, extra us per step, why it cannot be designed or "") of ``bank`` (``none``,
+    ``default``, ``every``) or of ``detector`` alone (the every-detector set-up) on aircraft ``ac``."""
+    from fdi_sim.errors import DesignError
 
-    from fdi_sim.scenario.loader import from_dict
-
-    if detector is None:
-        return lambda T: scenario(ac, T, bank, False, 0.5, False)
+    only = None if detector is None else (detector,)
 
     def make(T: float):
-        data = json.loads(scenario(ac, T, "every", False, 0.5, False).to_json())
-        data["detectors"] = [d for d in data.get("detectors", []) if d.get("type") == detector]
-        return from_dict(data, source=f"member cost, {ac}, {detector} alone")
-
-    return make
-
-
-def measure(ac: str, make) -> tuple[float, float, str]:
-    """(ratio to bare, extra us per step, note) of the scenario ``make(T)`` on aircraft ``ac``."""
-    from fdi_sim.errors import DesignError
+        return scenario(ac, T, "every" if only else bank, False, 0.5, False, detectors=only)
 
     with tempfile.TemporaryDirectory() as d:
         try:
-            warm = fly(make(2.0), d, progress=False, force=True)  # designs, training, compilation (cached)
+            fly(make(2.0), d, progress=False, force=True)  # designs, training, compilation (cached)
         except DesignError as exc:  # no member designable on this aircraft (engine gauges on a single engine)
             return float("nan"), float("nan"), str(exc).rsplit("skipped, ", 1)[-1]
-        members = warm.summary.fdi_detectors
-        sc = make(T_S)
-        bare, loop = [], []
-        for _ in range(REPEATS):  # interleaved so that machine load hits both alike
-            bare.append(bare_rate(ac, sc, T_S))
-            loop.append(loop_rate(sc, d))
-    b, lp = max(bare), max(loop)
-    skipped = [n for n in warm.summary.fdi_notes if "skipped" in n]
-    note = "; ".join(skipped) if skipped and not members else ""
-    return lp / b, 1e6 / lp - 1e6 / b, note
+        b, lp = best_rates(ac, make(T_S), d, T_S, REPEATS)
+    return lp / b, 1e6 / lp - 1e6 / b, ""
 
 
 def main() -> int:
@@ -95,7 +74,7 @@ def main() -> int:
     why_not: list[str] = []
     for ac in CASES:
         for k, (bank, det) in enumerate(rows):
-            ratio, us, note = measure(ac, _one(ac, bank, det))
+            ratio, us, note = measure(ac, bank, det)
             cells[(k, ac)] = ("cannot be designed here" if note else f"{ratio:.2f} / {us:.1f}")
             why = f" ({note})" if note else ""
             if note:

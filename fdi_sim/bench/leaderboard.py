@@ -103,6 +103,15 @@ def _f(x: Any, spec: str) -> str:
     return "-" if x is None else format(x, spec)  # (cli.py's _f also pads the dash to the column)
 
 
+def far_cell(s: dict[str, Any]) -> str:
+    """A scorer dict's false-alarm rate as a table cell: ``0.309 [0.180, 0.495]`` [1/flight h], or ``-``
+    without armed fault-free exposure."""
+    if s["far_per_h"] is None:
+        return "-"
+    lo, hi = s["far_per_h_ci"]
+    return f"{s['far_per_h']:.3f} [{lo:.3f}, {hi:.3f}]"
+
+
 def _ci(p: dict[str, Any]) -> str:
     return "-" if p.get("p") is None else f"{p['p']:.2f} [{p['ci'][0]:.2f}, {p['ci'][1]:.2f}]"
 
@@ -115,9 +124,8 @@ HEADER = ("method", "cases", "false alarms per h [95 %]", "P(detect) [95 %]", "d
 def _cells(r: Row) -> list[str]:
     s = r.scores
     d, a = s["detection"], s["alfa"]
-    far = "-" if s["far_per_h"] is None else f"{s['far_per_h']:.3f} [{s['far_per_h_ci'][0]:.3f}, {s['far_per_h_ci'][1]:.3f}]"
     beats = ("yes" if r.beats_alfa else "no") + (f" ({', '.join(r.beats_alfa_classes)})" if r.beats_alfa_classes else "")
-    return [r.method, str(s["cases"]), far, _ci(d["detected"]),
+    return [r.method, str(s["cases"]), far_cell(s), _ci(d["detected"]),
             f"{_f(d['delay_s_median'], '.2f')} / {_f(d['delay_s_p95'], '.2f')}", _ci(d["isolation"]),
             f"{_f(a['precision'], '.2f')} / {_f(a['recall'], '.2f')}", _f(a["mean_detection_time_s"], ".2f"),
             _f(s["event"]["f1"], ".2f"), _f(s["sample"]["auroc"], ".3f"), _f(s["sample"]["auprc"], ".3f"), beats]

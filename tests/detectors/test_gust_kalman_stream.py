@@ -40,10 +40,15 @@ def flight(tmp_path_factory):
     return det, log_samples(log, det.design.model, 20.0)
 
 
+def _outputs(N: int, p: int) -> dict[str, np.ndarray]:
+    """The arrays GustKalmanStream.process writes, in its argument order."""
+    return {"T": np.empty(N), "thr": np.empty(N), "valid": np.empty(N, bool), "hyp": np.empty(N, np.int64),
+            "cos": np.empty(N), "point": np.empty(N, np.int64), "nu": np.empty((N, p)), "yhat": np.empty((N, p))}
+
+
 def _go(stream: GustKalmanStream, s, blocks):
-    N, p = s.n, stream.n_outputs
-    out = dict(T=np.empty(N), thr=np.empty(N), valid=np.empty(N, bool), hyp=np.empty(N, np.int64), cos=np.empty(N),
-               point=np.empty(N, np.int64), nu=np.empty((N, p)), yhat=np.empty((N, p)))
+    N = s.n
+    out = _outputs(N, stream.n_outputs)
     u, y = s.du + s.u0, s.dy + s.y0
     stream.reset()
     i = 0
@@ -188,9 +193,7 @@ def test_a_heading_state_a_full_turn_on_changes_no_innovation(flight):
     st = GustKalmanStream(GustKalmanSchedule.single(design, det.calibration))
     a = _go(st, s, [s.n])
     i_x = list(design.model.state_names).index("psi_rad")
-    N, p = s.n, st.n_outputs
-    b = dict(T=np.empty(N), thr=np.empty(N), valid=np.empty(N, bool), hyp=np.empty(N, np.int64), cos=np.empty(N),
-             point=np.empty(N, np.int64), nu=np.empty((N, p)), yhat=np.empty((N, p)))
+    b = _outputs(s.n, st.n_outputs)
     st.reset()
     st._x[i_x] += 2.0 * np.pi  # the state a full orbit on
     st.process(s.du + s.u0, s.dy + s.y0, s.valid, *b.values())
