@@ -110,9 +110,18 @@ REGISTRY: tuple[SeedSet, ...] = (
             "six fault-free 300 s DHC-6 flights (light to severe air) the engine-gauge check's scales, its "
             "tail form and its turbulence exponent were judged on"),
     SeedSet("envelope-development", "development", (15101, 15102),
-            ("studies/f16_envelope_development", "studies/dhc6_envelope_development"),
+            ("studies/f16_envelope_development", "studies/dhc6_envelope_development",
+             "fdi_sim/detectors/engine_gauges.py"),
             "the envelope hold-out studies' development twins: looked at freely while the bank's turbulence "
-            "handling is made"),
+            "handling is made; the DHC-6's (with the engine-gauge check added, its 180 flights reflown with "
+            "full logs) gave the torque limiter's window and allowance and Np's exclusion"),
+    SeedSet("engine-gauge-hold-out", "hold-out", (15005,),
+            ("tests/data/engine_gauges/dhc6_engine_gauges_hold_out.toml",),
+            "the engine-gauge check's hold-out (issue 25): the envelope development study's sampling, written "
+            "after the limiter's window and Np's exclusion were chosen on seed 15102, flown once"),
+    SeedSet("engine-limiter-development", "development", _r(910, 914), ("tests/sim/test_engine_limiter.py",),
+            "four fault-free 300 s DHC-6 flights at 130 KIAS, 3,500 ft in severe air (the lever near full "
+            "travel): the engine-gauge check with and without the limiter's window, and a flameout in them"),
     SeedSet("atlas-hold-out-scenarios", "hold-out", (90417, 90418),
             ("tests/data/holdout/holdout_f16_roll_gyro_bias_7500ft.toml",
              "tests/data/holdout/holdout_dhc6_calm_6900ft.toml"),
