@@ -14,8 +14,9 @@ and switches from the active point ``c`` to the nearest ``i`` only when ``d_c - 
 hysteresis`` (no chattering on a boundary in turbulence). Switching is bumpless: the filter's
 state is a deviation from its design's trim, so the absolute estimate is carried across,
 ``dx_new = dx_old + x0_old - x0_new`` (plant, sensor-lag, gust and bias states alike: the
-augmented trim of gust and bias states is zero), and the innovation window, the gain index and the
-alarm state continue.
+augmented trim of gust and bias states is zero; the heading's ``x0_old - x0_new`` is wrapped to
+[-pi, pi), as JSBSim may read a trim heading of 0 as 2 pi: ``gust_kalman_stream``), and the
+innovation window, the gain index and the alarm state continue.
 """
 from __future__ import annotations
 
