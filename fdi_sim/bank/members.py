@@ -20,16 +20,14 @@ from fdi_sim.units import S_PER_H
 #: the detectors a new user gets, per aircraft (``docs/detectors.md``: the ones that work on it)
 #: (the flow-angle check watches the vanes, which nothing else isolates; in turbulence its threshold,
 #: set on the scenario's flights, is large and it only catches gross vane faults).
-#: Not (yet) in the DHC-6's: the engine-gauge check (``engine-gauges-v1``, opt-in with
-#: ``[[detectors]]``), which names the flameout the gust filter calls nx_g. In the DHC-6 envelope
-#: development study (seed 15102) it raised 11 episodes in 29.6 h, 22 x its share: near full power
-#: the model's torque limiter latches on one engine and not the other, and the propellers' speeds
-#: follow the yaw rate. The check now allows for the limiter near its limit and tests no Np
-#: (fdi_sim.detectors.engine_gauges); joining this bank needs the DHC-6 atlas made again with it
-#: (``python -m fdi_sim.study.atlas DHC6``, about an hour on 2 cores) and every bank block after it.
+#: The DHC-6's adds the engine-gauge check (``engine-gauges-v1``), which names the engine of a
+#: flameout or thrust loss (the gust filter calls a flameout nx_g and sees no thrust loss the autopilot
+#: makes up for). It joined once it allowed for the model's torque limiter near its limit and stopped
+#: testing Np (fdi_sim.detectors.engine_gauges: on the envelope development study, seed 15102, its
+#: episodes went from 11 in 29.6 h to none in 29.8 h).
 _COMMON = ("kalman-gust-v1", "kinematic-attitude-v1", "kinematic-altitude-v1", "kinematic-airspeed-v1",
            "kinematic-flow-angles-v1")
-DEFAULT_BANKS: dict[str, tuple[str, ...]] = {"f16": _COMMON, "DHC6": _COMMON}
+DEFAULT_BANKS: dict[str, tuple[str, ...]] = {"f16": _COMMON, "DHC6": _COMMON + ("engine-gauges-v1",)}
 
 
 #: keys of a [[detectors]] entry that are not design options

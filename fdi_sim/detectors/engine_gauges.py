@@ -238,11 +238,12 @@ def _kernel(y, ok, out_z, out_valid, out_hyp, out_r, thr, scales, n_avg, n_warm,
                 fs[_F_BASE0 + g] += a
                 fs[_F_BASE1 + g] += b
                 ist[_S_WARM + g] += 1
-        # the limiter's window: a torque near the limit, or one the check cannot read (it might be)
+        # the limiter's window: a torque near the limit, or one the check cannot read (it might be);
+        # never without a limiter (tq_open inf)
         near = False
         for e in range(2):
             v = y[j, 2 + e]
-            if not (ok[j, 2 + e] and math.isfinite(v)) or v > tq_open:
+            if tq_open < math.inf and (not (ok[j, 2 + e] and math.isfinite(v)) or v > tq_open):
                 near = True
         if near:
             ist[_S_SINCE] = 0

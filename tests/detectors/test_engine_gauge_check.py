@@ -2,6 +2,7 @@
 streaming contract, what it names on synthetic gauges with a known answer."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -225,5 +226,10 @@ def test_an_unreadable_torque_opens_the_window() -> None:
     out = _run(make_engine_gauges(aircraft="DHC6"), y, ok)
     assert (out.residual[1204:1900, 0] == 0.0).all()
     y[2300:2400, 1] -= 3.0  # 300 samples after the gauge came back: tested again
-    out = _run(make_engine_gauges(aircraft="DHC6"), y, ok)
+    s = make_engine_gauges(aircraft="DHC6")
+    out = _run(s, y, ok)
     assert (out.residual[2304:2400, 0] > 50.0).all()
+    # without a limiter there is nothing to allow for: an unreadable torque opens no window
+    free = EngineGaugeStream(dataclasses.replace(s.design, torque_limit_ftlb=math.inf))
+    out = _run(free, y, ok)
+    assert (out.residual[1204:1900, 0] > 50.0).all()
