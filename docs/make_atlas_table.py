@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+from fdi_sim.bank.members import DEFAULT_BANKS  # noqa: E402
 from fdi_sim.training.atlas import read_atlas  # noqa: E402
 
 AIRCRAFT = ("f16", "DHC6")
@@ -85,7 +86,8 @@ def render() -> str:
     lines.append("")
     lines.append("Per node: " + read_atlas(ROOT / "aircraft" / AIRCRAFT[0] / "fdi_atlas.json").training
                  + ", no wind, sensor-noise scale 1; thresholds at the bank's 0.1 false alarms per flight hour split "
-                 "over its five members.")
+                 "evenly over its members (" + "; ".join(f"{ac}: {len(DEFAULT_BANKS[ac])}, {0.1 / len(DEFAULT_BANKS[ac]):.3g} "
+                                                         "per h each" for ac in AIRCRAFT) + ").")
     lines += ["", "| new scenario (tests/data/holdout, its faults left out) | calibration in its log | node | start to the "
               "end of a 0.5 s flight, fresh process, empty cache [s] |", "|---|---|---|---|"]
     for path in HOLDOUT:

@@ -18,7 +18,7 @@ engines' truth gauges, 0.2 s means as the check takes them):
   itself: above 1,629.3 lbf ft with its lever not moving back, it pulls that engine's throttle
   down, then holds it below the lever until the lever comes back below it. In a yaw the engines'
   torques differ by a few lbf ft, so one engine latches and the other does not. Within 5 s of
-  either measured torque coming within ``limiter_margin_ftlb`` of the limit (22 % of the flight
+  either measured torque coming within ``limiter_margin_ftlb`` of the limit (42 % of the flight
   time there, near full power), the engines differed by up to 2.97 % Ng and 322 lbf ft (73 and 38
   times the 0.2 s mean's noise); 5 s or more after it, by 0.053 % Ng and 30 lbf ft (1.3 and 3.5
   times), 10 s or more after it, by 0.042 % and 16 lbf ft. The check cannot know the limiter's
