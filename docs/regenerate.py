@@ -4,8 +4,8 @@ with nothing else running), each command once however many blocks it writes.
 
     python docs/regenerate.py --out-root DIR [--workers 2] [--dry-run] [--skip make_x.py,...]
 
-Staleness is :func:`fdi_sim.stamp.stale_blocks` over ``docs/*.md``, ``docs/card/*.json`` and
-``README.md`` (what ``tests/test_generated_docs.py`` checks); each stale block names its command.
+Staleness is :func:`fdi_sim.stamp.stale_stamps` over :func:`fdi_sim.stamp.generated_files` (what
+``tests/test_generated_docs.py`` checks); each stale block's stamp names its command.
 ``DIR`` in a command (the benchmark folders) becomes ``DIR/bench``, and the envelope table gets
 ``--out-root DIR/envelope``, so a second call after an interruption reuses the flights already
 made (the studies resume; the training flights come from ``$FDI_SIM_CACHE``). After each command
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import subprocess
 import sys
 import time
@@ -28,7 +27,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from fdi_sim.stamp import stale_blocks  # noqa: E402
+from fdi_sim.stamp import generated_files, stale_stamps  # noqa: E402
 
 #: the scripts that time something (wall clock, rates, ratios against bare JSBSim): run last, in
 #: this order, after every flying step; the benchmark's cost block is measured while it flies
@@ -39,20 +38,16 @@ TIMING = ("make_bank_speed_table.py", "make_member_cost_table.py", "make_review_
 FIRST = ("make_detector_card.py", "make_in_loop_table.py")
 
 
-def stale(root: Path = ROOT) -> list[str]:
-    """Every stale block's line (``file [id]: ... run `command```)."""
-    files = sorted((root / "docs").glob("*.md")) + sorted((root / "docs" / "card").glob("*.json"))
-    return [line for f in files + [root / "README.md"] for line in stale_blocks(f, root)]
+def stale(root: Path = ROOT) -> list[tuple[str, str]]:
+    """Every stale block as ``(command, "file [id]")``."""
+    return [(s.command, f"{f.name} [{s.id}]") for f in generated_files(root) for s, _ in stale_stamps(f, root)]
 
 
-def commands(lines: list[str]) -> dict[str, list[str]]:
-    """The commands of the stale lines, each with the blocks it writes, in queue order."""
+def commands(blocks: list[tuple[str, str]]) -> dict[str, list[str]]:
+    """The commands of the stale blocks, each with the blocks it writes, in queue order."""
     out: dict[str, list[str]] = {}
-    for line in lines:
-        m = re.search(r"run `(.*)`$", line)
-        if m is None:
-            raise SystemExit(f"a stale line names no command: {line!r}; fix its script's stamp")
-        out.setdefault(m.group(1), []).append(line.split(":")[0])
+    for cmd, block in blocks:
+        out.setdefault(cmd, []).append(block)
 
     def rank(cmd: str) -> tuple[int, int]:
         script = Path(cmd.split()[1]).name

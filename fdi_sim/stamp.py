@@ -26,12 +26,15 @@ from pathlib import Path
 __all__ = [
     "ROOT",
     "Stamp",
+    "file_stamps",
     "generated_block",
+    "generated_files",
     "inputs_digest",
     "make_stamp",
     "read_blocks",
     "replace_block",
     "stale_blocks",
+    "stale_stamps",
     "table_main",
 ]
 
@@ -144,28 +147,42 @@ def replace_block(text: str, stamp: Stamp, body: str) -> str:
     return text.rstrip() + "\n\n" + new + "\n"
 
 
-def stale_blocks(path: Path, root: Path = ROOT) -> list[str]:
-    """What is stale in the generated blocks of a Markdown file (or the stamp of a JSON card):
-    one line per block whose inputs changed since it was made, naming the command to run."""
+def generated_files(root: Path = ROOT) -> list[Path]:
+    """Every file that may hold generated blocks: ``README.md``, ``docs/*.md`` and the stamped JSON
+    cards ``docs/card/*.json``."""
+    return ([root / "README.md"] + sorted((root / "docs").glob("*.md"))
+            + sorted((root / "docs" / "card").glob("*.json")))
+
+
+def file_stamps(path: Path) -> list[Stamp]:
+    """The stamps of a Markdown file's generated blocks, or a JSON card's stamp."""
     path = Path(path)
     text = path.read_text()
-    if path.suffix == ".json":
-        card = json.loads(text)
-        d = card.get("stamp") if isinstance(card, dict) else None
-        stamps = [] if not isinstance(d, dict) else [Stamp(**{**d, "inputs": tuple(d["inputs"])})]
-    else:
-        stamps = [s for s, _ in read_blocks(text)]
+    if path.suffix != ".json":
+        return [s for s, _ in read_blocks(text)]
+    card = json.loads(text)
+    d = card.get("stamp") if isinstance(card, dict) else None
+    return [] if not isinstance(d, dict) else [Stamp(**{**d, "inputs": tuple(d["inputs"])})]
+
+
+def stale_stamps(path: Path, root: Path = ROOT) -> list[tuple[Stamp, str]]:
+    """The stamps of ``path`` whose inputs changed since they were made, each with why."""
     out = []
-    for s in stamps:
+    for s in file_stamps(path):
         try:
             now = inputs_digest(s.inputs, root)
         except FileNotFoundError as e:
-            out.append(f"{path.name} [{s.id}]: {e}; run `{s.command}`")
+            out.append((s, str(e)))
             continue
         if now != s.inputs_sha256:
-            out.append(f"{path.name} [{s.id}]: stale (inputs {', '.join(s.inputs)} changed since commit {s.commit}); "
-                       f"run `{s.command}`")
+            out.append((s, f"stale (inputs {', '.join(s.inputs)} changed since commit {s.commit})"))
     return out
+
+
+def stale_blocks(path: Path, root: Path = ROOT) -> list[str]:
+    """What is stale in the generated blocks of a Markdown file (or the stamp of a JSON card):
+    one line per block whose inputs changed since it was made, naming the command to run."""
+    return [f"{Path(path).name} [{s.id}]: {why}; run `{s.command}`" for s, why in stale_stamps(path, root)]
 
 
 def table_main(md: Path, command: str, blocks: Sequence[tuple[str, Sequence[str], Callable[[], str]]],

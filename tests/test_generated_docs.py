@@ -15,6 +15,7 @@ from pathlib import Path
 
 
 from fdi_sim.stamp import (
+    generated_files,
     inputs_digest,
     make_stamp,
     read_blocks,
@@ -23,8 +24,8 @@ from fdi_sim.stamp import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = [ROOT / "README.md"] + sorted((ROOT / "docs").glob("*.md"))
-CARDS = sorted((ROOT / "docs" / "card").glob("*.json"))
+DOCS = [p for p in generated_files(ROOT) if p.suffix == ".md"]
+CARDS = [p for p in generated_files(ROOT) if p.suffix == ".json"]
 MARKER = re.compile(r"^<!-- table: (reference|result, unstamped; regenerate: .+) -->$")
 
 

@@ -16,24 +16,21 @@ def _module():
     return mod
 
 
-def _line(md: str, block: str, cmd: str) -> str:
-    return f"{md} [{block}]: stale (inputs aircraft changed since commit abc); run `{cmd}`"
-
-
 def test_timing_blocks_go_last_and_each_command_runs_once():
     rg = _module()
-    lines = [_line("bench.md", "leaderboard", "python docs/make_bench_tables.py --out-root DIR --workers 2"),
-             _line("bank.md", "bank-speed", "python docs/make_bank_speed_table.py"),
-             _line("bank.md", "bank-bars", "python docs/make_bank_bars_table.py"),
-             _line("README.md", "bank-summary", "python docs/make_bank_bars_table.py"),
-             _line("review.md", "review-timing", "python docs/make_review_table.py"),
-             _line("detectors.md", "detector-card-conditions", "python docs/make_detector_card.py"),
-             _line("bench.md", "bench-cost", "python docs/make_bench_tables.py --out-root DIR --workers 2")]
-    q = rg.commands(lines)
+    bench = "python docs/make_bench_tables.py --out-root DIR --workers 2"
+    bars = "python docs/make_bank_bars_table.py"
+    blocks = [(bench, "bench.md [leaderboard]"), ("python docs/make_bank_speed_table.py", "bank.md [bank-speed]"),
+              (bars, "bank.md [bank-bars]"), (bars, "README.md [bank-summary]"),
+              ("python docs/make_review_table.py", "review.md [review-timing]"),
+              ("python docs/make_detector_card.py", "detectors.md [detector-card-conditions]"),
+              (bench, "bench.md [bench-cost]")]
+    q = rg.commands(blocks)
     scripts = [Path(c.split()[1]).name for c in q]
     assert scripts == ["make_detector_card.py", "make_bank_bars_table.py", "make_bank_speed_table.py",
                        "make_review_table.py", "make_bench_tables.py"]
-    assert q["python docs/make_bank_bars_table.py"] == ["bank.md [bank-bars]", "README.md [bank-summary]"]
+    assert q[bars] == ["bank.md [bank-bars]", "README.md [bank-summary]"]
+    assert q[bench] == ["bench.md [leaderboard]", "bench.md [bench-cost]"]
 
 
 def test_commands_as_run(tmp_path):
@@ -45,18 +42,23 @@ def test_commands_as_run(tmp_path):
     assert env[-4:] == ["--out-root", str(tmp_path / "envelope"), "--workers", "2"]
 
 
-def test_a_line_without_a_command_is_refused():
+def test_a_stale_block_is_found_with_its_command(tmp_path):
+    """A copy of the repository's docs with one block's inputs changed: that block, and its command."""
+    from fdi_sim.stamp import make_stamp, replace_block
+
     rg = _module()
-    try:
-        rg.commands(["bank.md [x]: stale (inputs changed)"])
-    except SystemExit as e:
-        assert "names no command" in str(e)
-    else:
-        raise AssertionError("a stale line without a command was accepted")
+    (tmp_path / "docs" / "card").mkdir(parents=True)
+    (tmp_path / "README.md").write_text("# x\n")
+    (tmp_path / "in.txt").write_text("a")
+    md = tmp_path / "docs" / "t.md"
+    md.write_text(replace_block("# t\n", make_stamp("blk", "python docs/make_t.py", ("in.txt",), tmp_path), "| 1 |"))
+    assert rg.stale(tmp_path) == []
+    (tmp_path / "in.txt").write_text("b")
+    assert rg.stale(tmp_path) == [("python docs/make_t.py", "t.md [blk]")]
 
 
 def test_the_queue_reads_the_repository():
-    """Every stale line of the checkout parses into a command (empty when nothing is stale)."""
+    """Every stale block of the checkout names a docs script (none when nothing is stale)."""
     rg = _module()
     for cmd in rg.commands(rg.stale()):
         assert cmd.startswith("python docs/make_")
