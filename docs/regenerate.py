@@ -96,11 +96,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{len(done) + 1}, {len(queue) - 1} more queued] {cmd}  ({len(blocks)} blocks)", flush=True)
         t0 = time.perf_counter()
         rc = subprocess.run(argv_of(cmd, a.out_root, a.workers), cwd=ROOT).returncode
-        dt = time.perf_counter() - t0
+        wall_s = time.perf_counter() - t0
         with log.open("a") as f:
-            f.write(json.dumps({"command": cmd, "rc": rc, "wall_s": round(dt, 1), "blocks": blocks,
+            f.write(json.dumps({"command": cmd, "rc": rc, "wall_s": round(wall_s, 1), "blocks": blocks,
                                 "time": time.strftime("%Y-%m-%dT%H:%M:%S")}) + "\n")
-        print(f"    rc {rc}, {dt / 60:.1f} min", flush=True)
+        print(f"    rc {rc}, {wall_s / 60:.1f} min", flush=True)
         if rc != 0:
             raise SystemExit(f"`{cmd}` failed (rc {rc}); fix it and run this again (done steps are not redone)")
         left = [b for c, bs in commands(stale()).items() if c == cmd for b in bs]
