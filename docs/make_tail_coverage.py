@@ -8,8 +8,9 @@ tail of shape 0.3, under the bank's 3-of-5 persistence). Each trial draws 24 fli
 :func:`fdi_sim.decision.tail.confident_episode_threshold` at a target rate; the threshold's true
 rate comes from the exact rate curve. Coverage is the share of trials whose true rate is at or
 below the target (the bound promises 95 %), with its Clopper-Pearson interval. The extrapolation
-is the nominal one the issue names: (100 episodes the fit starts from / 2 h) / target, so the
-bank's 0.02 per h per member is 2,500 x.
+is the nominal one the issue names: (100 episodes the fit starts from / 2 h) / target. The
+default banks' member targets (the bank's default ``far_per_h`` split evenly over the members of
+each aircraft's default bank, :data:`MEMBER_TARGETS_PER_H`) are among the targets measured.
 
 Cost: how much larger than the exact level a threshold is, on the ``|x|`` scale (a fault must
 move the statistic that much further to be seen): the median and 95th percentile of
@@ -31,19 +32,26 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from fdi_sim.bank.members import DEFAULT_BANKS  # noqa: E402
 from fdi_sim.decision.intervals import clopper_pearson  # noqa: E402
 from fdi_sim.decision.tail import MAX_EXTRAPOLATION, TAIL_EPISODES, confident_episode_threshold  # noqa: E402
 from fdi_sim.decision.tail_truth import TRANSFORMS, Ar1Statistic, ar1_flights, episode_rate_curve  # noqa: E402
 from fdi_sim.errors import DesignError  # noqa: E402
 from fdi_sim.seeds import seeds  # noqa: E402
+from fdi_sim.scenario.schema import FdiSection  # noqa: E402
 from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 
-INPUTS = ("fdi_sim/decision/tail.py", "fdi_sim/decision/tail_truth.py", "docs/make_tail_coverage.py")
+INPUTS = ("fdi_sim/decision/tail.py", "fdi_sim/decision/tail_truth.py", "fdi_sim/bank/members.py",
+          "fdi_sim/scenario/schema.py", "docs/make_tail_coverage.py")
 N_FLIGHTS, FLIGHT_S = 24, 300.0
 TRAINING_H = N_FLIGHTS * FLIGHT_S / 3600.0
-#: targets [1/h]: nominal extrapolations 25 x, 250 x, 2,500 x (the bank's member target), 8,333 x
-#: (just inside MAX_EXTRAPOLATION, counted from the fitted level's own rate, about 50-55 per h)
+#: per aircraft: the default bank's per-member target [1/h], the default ``far_per_h`` split evenly
+MEMBER_TARGETS_PER_H = {ac: FdiSection.model_fields["far_per_h"].default / len(bank) for ac, bank in DEFAULT_BANKS.items()}
+#: targets [1/h]: nominal extrapolations 25 x, 250 x, 2,500 x, 8,333 x (just inside MAX_EXTRAPOLATION,
+#: counted from the fitted level's own rate, about 50-55 per h), then every member target not among
+#: them (appended: a target's index seeds its trials, so the earlier rows keep their draws)
 TARGETS_PER_H = (2.0, 0.2, 0.02, 0.006)
+TARGETS_PER_H += tuple(sorted({t for t in MEMBER_TARGETS_PER_H.values() if t not in TARGETS_PER_H}, reverse=True))
 SEED = seeds("tail-coverage")[0]
 MD = ROOT / "docs" / "tail_coverage.md"
 CARD = ROOT / "docs" / "card" / "tail_coverage.json"
@@ -52,11 +60,12 @@ CARD = ROOT / "docs" / "card" / "tail_coverage.json"
 #: the statistic's form given to the fit (a stream's ``tail_power``) for these statistics, at the
 #: bank's extrapolations: the rows the default bank's members are judged by
 GIVEN = {"gaussian |x|": (2.0, False), "chi-square(1) x^2": (1.0, True)}  # (tail_power, tail_heavy)
-GIVEN_TARGETS = (0.02, 0.006)
+GIVEN_TARGETS = tuple(sorted(set(MEMBER_TARGETS_PER_H.values()) | {0.006}, reverse=True))
 
 
 def _cases() -> list[tuple[str, float | None, float]]:
-    return ([(tr, None, tg) for tr in TRANSFORMS for tg in TARGETS_PER_H]
+    """(statistic, given tail power or None, target) per row, each statistic's targets falling."""
+    return ([(tr, None, tg) for tr in TRANSFORMS for tg in sorted(TARGETS_PER_H, reverse=True)]
             + [(tr, pw, tg) for tr, (pw, _) in GIVEN.items() for tg in GIVEN_TARGETS])
 
 
@@ -128,7 +137,10 @@ def render(data: dict) -> str:
              "the training data, or given as a member gives it (`tail_power`, `tail_heavy`: the default bank's "
              "kinematic checks x^2 and light-tailed, its gust filter x^1; the same flights as the chosen row). "
              "`heavy`: share of trials "
-             f"whose point fit chose a heavy tail. Refused: targets beyond {data['max_extrapolation']:g} x.", "",
+             f"whose point fit chose a heavy tail. Refused: targets beyond {data['max_extrapolation']:g} x. "
+             "The default banks' member targets: " + "; ".join(
+                 f"{ac} {len(DEFAULT_BANKS[ac])} members, {t:.3g} per h ({TAIL_EPISODES / TRAINING_H / t:,.0f} x)"
+                 for ac, t in MEMBER_TARGETS_PER_H.items()) + ".", "",
              "| statistic | tail form | target [1/h] | extrapolation | coverage [95 % CI] | refused | u ratio "
              "(median / p95) | true rate median / max [1/h] | heavy |",
              "|---|---|---|---|---|---|---|---|---|"]

@@ -1,5 +1,6 @@
 """The exact episode rates of the synthetic statistics, and the tail bound's coverage measured
-against them at the extrapolation the bank uses (2,500 x)."""
+against them at the extrapolation the default banks use (the smallest member target: the DHC-6's
+six members, 3,000 x)."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,7 +15,12 @@ from fdi_sim.decision.tail_truth import (
     episode_rate_curve,
     simulate_episode_rate,
 )
+from fdi_sim.bank.members import DEFAULT_BANKS
 from fdi_sim.errors import DesignError
+from fdi_sim.scenario.schema import FdiSection
+
+#: the smallest per-member target of the default banks [1/h]: the default far_per_h over the largest bank
+MEMBER_TARGET_PER_H = FdiSection.model_fields["far_per_h"].default / max(len(b) for b in DEFAULT_BANKS.values())
 
 
 def test_one_of_one_matches_the_bivariate_normal():
@@ -54,16 +60,18 @@ def test_every_transform_has_the_episodes_of_abs_x(transform):
 
 LIGHT_XFAIL = pytest.mark.xfail(strict=True, reason=(
     "the form the kinematic checks give (x^2, light-tailed) covers about 0.92 at 2,500 x, not the 95 % "
-    "promised nor 36 of these 40: 33 of 40 here, 162 of 180 on seeds [77, 0..179], 188 of 200 in "
+    "promised nor 36 of these 40: 33 of 40 here (at 3,000 x; 33 at 2,500 x too), 162 of 180 on seeds "
+    "[77, 0..179] at 2,500 x, 188 of 200 there in "
     "docs/tail_coverage.md; probably the exponential in x^2 is a little too light at the fitted level (Rice's "
     "polynomial factor), a bias the bootstrap cannot see"))
 
 
 @pytest.mark.parametrize("power, heavy", [(None, True), pytest.param(2.0, False, marks=LIGHT_XFAIL)],
                          ids=["form-chosen", "form-given-light"])
-def test_the_bound_covers_a_gaussian_statistic_at_2500x(power, heavy):
+def test_the_bound_covers_a_gaussian_statistic_at_the_member_target(power, heavy):
     """The issue's bar: 24 x 300 s of a Gaussian AR(1) statistic (10 s correlation, 3-of-5), the
-    target 0.02 per h (2,500 x beyond the fitted level's 50 per h): the share of 40 trials whose
+    default banks' smallest member target (0.1 / 6 per h, 3,000 x beyond the fitted level's 50 per
+    h; the F-16's 0.02 is 2,500 x): the share of 40 trials whose
     bound's exact rate meets the target is at least 0.9, with the tail's form chosen from the data
     and given as the kinematic checks give it (the full table, 200 trials a row:
     docs/tail_coverage.md)."""
@@ -72,9 +80,9 @@ def test_the_bound_covers_a_gaussian_statistic_at_2500x(power, heavy):
     covered = 0
     for t in range(40):
         rng = np.random.default_rng([77, t])
-        thr, _ = confident_episode_threshold(ar1_flights(stat, 24, 300.0, rng), 0.02, [300.0 / 3600.0] * 24, rng,
-                                             power=power, heavy=heavy)
-        covered += curve.rate_per_h(thr) <= 0.02
+        thr, _ = confident_episode_threshold(ar1_flights(stat, 24, 300.0, rng), MEMBER_TARGET_PER_H,
+                                             [300.0 / 3600.0] * 24, rng, power=power, heavy=heavy)
+        covered += curve.rate_per_h(thr) <= MEMBER_TARGET_PER_H
     print(f"form {power}, heavy {heavy}: {covered} of 40 covered")
     assert covered >= 36, covered
 
