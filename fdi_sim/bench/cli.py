@@ -18,14 +18,17 @@ CALLS_FILE = "bench_calls.jsonl"
 
 
 def record_call(out: Path, outcome: Any, workers: int | None, scheduler: str | None) -> None:
-    """Append what a call flew to the folder's :data:`CALLS_FILE` (designs included in its wall time)."""
+    """Append what a call flew to the folder's :data:`CALLS_FILE`: cases, flight hours, wall time (designs
+    included), and the designs it needed with their wall time summed over the workers (a cold call, whose
+    designs flew their training flights, told from a warm one)."""
     import datetime
 
     if not outcome.flown:
         return
     line = {"date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"), "flown": outcome.flown,
             "flight_h": outcome.flight_h, "wall_s": outcome.wall_s, "workers": workers, "scheduler": scheduler,
-            "interrupted": outcome.interrupted}
+            "interrupted": outcome.interrupted, "designs": outcome.designs,
+            "design_wall_s": round(outcome.design_wall_s, 1)}
     with open(out / CALLS_FILE, "a", encoding="utf-8") as f:
         f.write(json.dumps(line) + "\n")
 

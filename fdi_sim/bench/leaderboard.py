@@ -76,20 +76,22 @@ def leaderboard_rows(folders: Sequence[Path], split: str = "all") -> list[Row]:
 
 
 #: how a subset of the default banks' results is named in a row
-_AIRCRAFT = {"aircraft:f16": "F-16", "aircraft:DHC6": "DHC-6"}
+AIRCRAFT_LABELS = {"aircraft:f16": "F-16", "aircraft:DHC6": "DHC-6"}
 
 
 def result_rows(d: dict[str, Any], subset: str) -> list[Row]:
     """One row per method of a ``bench.json`` (``d``) on ``subset``: the default banks' members named
-    with their aircraft's bank, the OR of a detectors bank as ``all detectors (OR)``."""
-    ac = _AIRCRAFT.get(subset, "")
+    with their aircraft's bank, the OR of a detectors bank as ``all detectors (OR)``, a detectors
+    bank's rows on one aircraft with the aircraft in brackets."""
+    ac = AIRCRAFT_LABELS.get(subset, "")
     out = []
     for m, s in d["scored"][subset].items():
         if d["bank"] == "default":
             where = f", {ac}" if ac else ""
             label = f"default bank{where}" if m == "bank" else f"{m} ({ac + ' ' if ac else ''}default bank)"
         else:
-            label = "all detectors (OR)" if m == "bank" else m
+            base = "all detectors (OR)" if m == "bank" else m
+            label = f"{base} ({ac})" if ac else base
         out.append(Row(label, d["bank"], d["suite"], d["suite_hash"], subset, s))
     return out
 

@@ -73,8 +73,14 @@ class StudyOutcome:
     interrupted : bool
         Ctrl-C or SIGTERM stopped it (every finished run is kept).
     wall_s : float
+        This call's wall time, designs included [s].
     flight_h : float
         Flight hours this call flew [h].
+    designs : int
+        Bank designs this call needed (one per design group of the runs it flew).
+    design_wall_s : float
+        Their wall time summed over the workers [s]: seconds when every design came from the cache,
+        minutes per design that flew its training flights (a cold call and a warm one told apart).
     """
 
     out_dir: Path
@@ -85,6 +91,8 @@ class StudyOutcome:
     interrupted: bool
     wall_s: float
     flight_h: float
+    designs: int = 0
+    design_wall_s: float = 0.0
 
     @property
     def complete(self) -> bool:
@@ -395,8 +403,9 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
     interrupted = False
     bar = _bar(todo_h, progress, study.name)
     futures: list[Any] = []
+    design_futs: dict[str, Any] = {}
+    design_wall_s = 0.0
     try:
-        design_futs = {}
         key_of = {i: k for (i, _, _), k in zip(planned, keys)}
         for key, sc in groups.items():
             design_futs[key] = client.submit(prepare_design, sc.to_json(), sc.source, key=f"design-{key}",
@@ -424,6 +433,7 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
                     raise StudyError(study.source, "bank", f"the bank cannot be designed: {r['error']}",
                                      "fix the bank section or the sampled point (or bank.on_design_failure = \"skip\")")
                 designed += 1
+                design_wall_s += float(r.get("wall_s", 0.0))
                 if bar is not None and designed < len(design_futs):
                     bar.set_postfix_str(f"{designed}/{len(design_futs)} bank designs ready, {flown} runs stored")
                 continue
@@ -454,7 +464,8 @@ def _fly(study: Study, out_dir: str | Path, workers: int | None, held: dict[str,
             client.cancel(futures, force=True)  # runs not finished are not wanted any more
         except Exception:  # noqa: BLE001 - closing anyway
             pass
-    return StudyOutcome(out, total, len(done), flown, lost, interrupted, time.perf_counter() - t0, hours)
+    return StudyOutcome(out, total, len(done), flown, lost, interrupted, time.perf_counter() - t0, hours,
+                        len(design_futs), design_wall_s)
 
 
 def _bar(total_h: float, progress: bool, name: str) -> Any:

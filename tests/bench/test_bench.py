@@ -100,6 +100,21 @@ def test_a_bench_run_grows_and_resumes_without_flying_a_case_twice(flown):
     assert rec0.stat().st_mtime_ns == mtime  # the first case was not flown again
 
 
+def test_a_call_records_its_designs_and_their_wall_time(flown, tmp_path):
+    """The calls log says how many designs a call needed and what they cost, so that a reader of the
+    cost block tells a call whose designs flew their training flights from one served by the cache."""
+    from fdi_sim.bench.cli import read_calls, record_call
+
+    o1, o2, o3, _ = flown["outcomes"]
+    assert o1.designs >= 1 and o2.designs >= 1 and 0.0 < o2.design_wall_s <= 2 * o2.wall_s  # two workers
+    assert (o3.designs, o3.design_wall_s) == (0, 0.0)  # nothing left to fly: no design asked for
+    for o in (o2, o3):
+        record_call(tmp_path, o, 2, None)
+    calls = read_calls(tmp_path)
+    assert len(calls) == 1  # a call that flew nothing is not a cost
+    assert calls[0]["designs"] == o2.designs and calls[0]["design_wall_s"] == round(o2.design_wall_s, 1)
+
+
 def test_one_worker_gives_the_records_of_two(flown):
     a = load_records(flown["tmp"] / "two")
     b = load_records(flown["tmp"] / "one")
