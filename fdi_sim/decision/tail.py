@@ -21,13 +21,14 @@ import numpy as np
 from typing import Sequence
 
 from numpy.typing import NDArray
-from scipy.optimize import minimize_scalar
+from scipy.optimize import fmin, minimize_scalar
+from scipy.special import xlog1py
 from scipy.stats import genpareto
 
 from fdi_sim.decision.base import check_probability
 from fdi_sim.errors import DesignError
 
-__all__ = ["tail_threshold", "confident_tail_threshold", "persistence_series", "episode_threshold",
+__all__ = ["tail_threshold", "confident_tail_threshold", "fit_gpd", "persistence_series", "episode_threshold",
            "confident_episode_threshold"]
 
 #: exceedances an empirical quantile needs
@@ -74,10 +75,64 @@ def tail_threshold(x: NDArray[np.float64], p: float) -> tuple[float, str]:
     if z.size < MIN_TAIL:  # ties at the top (a saturated or discrete statistic): no tail to fit
         return float(x.max()), (f"degenerate upper tail ({z.size} of {n} samples above the {1 - q:.4f} quantile "
                                 f"{u:.4g}): the training maximum")
-    xi, _, sigma = genpareto.fit(z, floc=0.0)
+    xi, sigma = fit_gpd(z)
     thr = u + float(genpareto.ppf(1.0 - p / q, xi, loc=0.0, scale=sigma))
     return thr, (f"GPD tail over the {1 - q:.4f} quantile ({z.size} exceedances of {n}), xi {xi:.3f}, sigma "
                  f"{sigma:.3g}, extrapolated {q / p:.3g} x beyond it")
+
+
+#: scipy's penalty per sample outside the support or of infinite log-density, over 100
+#: (``rv_continuous._nnlf_and_penalty``: ``n_bad * log(_XMAX) * 100``)
+_LOG_XMAX = float(np.log(np.finfo(float).max))
+
+
+def _gpd_nnlf(theta: NDArray[np.float64], z: NDArray[np.float64]) -> float:
+    """The objective of ``genpareto.fit(z, floc=0)``, value for value: the negative log-likelihood
+    of the generalized Pareto at ``theta = (xi, sigma)`` with scipy's penalty for samples outside
+    the support (``rv_continuous._penalized_nnlf``), in plain numpy.
+
+    ``-log f(x) = (1 + 1/xi) log(1 + xi x / sigma) + log sigma`` (``x / sigma`` for ``xi = 0``);
+    support ``x >= 0``, and ``x <= -sigma / xi`` when ``xi < 0``. Scipy evaluates the same
+    expressions through its array-API layer, 20 us a call of the ~190 a fit makes: a bootstrap of
+    200 fits per member was 93 % of a seventeen-member bank's design (tests/sim/test_every_detector.py,
+    133 s, cProfile).
+    """
+    c, s = float(theta[0]), float(theta[1])
+    if not math.isfinite(c) or s <= 0.0:
+        return math.inf
+    x = z / s
+    n = x.size
+    bad = (x < 0.0) | (x > -1.0 / c) if c < 0.0 else x < 0.0
+    n_bad = int(np.count_nonzero(bad))
+    if n_bad:
+        x = x[~bad]
+    lp = -x if c == 0.0 else -xlog1py(c + 1.0, c * x) / c
+    finite = np.isfinite(lp)
+    n_bad += int(np.count_nonzero(~finite))
+    if n_bad:
+        return float(-np.sum(lp[finite]) + n_bad * _LOG_XMAX * 100 + n * np.log(s))
+    return float(-np.sum(lp) + n * np.log(s))
+
+
+def fit_gpd(z: NDArray[np.float64]) -> tuple[float, float]:
+    """Maximum-likelihood generalized Pareto fit of exceedances ``z`` (location 0): ``(xi, sigma)``.
+
+    ``genpareto.fit(z, floc=0.0)`` bit for bit (tests/decision/test_decision_tail.py checks it on
+    light, heavy and bounded tails): scipy's start (``_fitstart``: xi 1, its scale estimate), its
+    Nelder-Mead (``scipy.optimize.fmin`` with its defaults) on the same objective values
+    (:func:`_gpd_nnlf`), 2.5 x faster.
+
+    Raises
+    ------
+    DesignError
+        The optimum is outside the distribution's parameter range (scipy's ``FitError``).
+    """
+    z = np.asarray(z, dtype=float).ravel()
+    start = genpareto._fitstart(z)  # (xi, loc, scale): loc is fixed at 0 and left out, as fit() does
+    xi, sigma = fmin(_gpd_nnlf, (start[0], start[-1]), args=(z,), disp=0)
+    if not (math.isfinite(xi) and sigma > 0.0):
+        raise DesignError(f"the tail fit converged outside the generalized Pareto's range (xi {xi}, sigma {sigma})")
+    return float(xi), float(sigma)
 
 
 def confident_tail_threshold(flights: Sequence[NDArray[np.float64]], p: float, rng: np.random.Generator,
