@@ -20,3 +20,14 @@ def aircraft_base(aircraft: str) -> str:
 def aircraft_file(aircraft: str, name: str) -> Path:
     """``aircraft/<aircraft>/<name>`` (``"DHC6..."`` variants share the DHC-6 folder)."""
     return AIRCRAFT_DATA / aircraft_base(aircraft) / name
+
+
+def shown_path(path: Path | str) -> str:
+    """``path`` as logs and notes show it: the package's own data as ``fdi_sim/_aircraft/<aircraft>/<file>``,
+    any other file as given (a user's own). A log must not depend on where the package was checked out
+    or installed: the same seed gives the same log on every machine."""
+    p = Path(path)
+    try:
+        return (Path("fdi_sim") / "_aircraft" / p.relative_to(AIRCRAFT_DATA)).as_posix()
+    except ValueError:
+        return str(p)

@@ -227,6 +227,7 @@ def _kernel(y, ok, out_z, out_valid, out_hyp, out_r, thr, scales, n_avg, n_warm,
     if ok.shape[0] != n or y.shape[1] != 6 or ok.shape[1] != 6 or out_z.shape[0] != n or out_r.shape[1] != 3:
         raise ValueError("EngineGaugeStream.process: y, ok (N, 6), out_* (N,) and out_residual (N, 3) must agree")
     sq = math.sqrt(n_avg)
+    has_limiter = tq_open < math.inf
     for j in range(n):
         pos = ist[_S_POS]
         for g in range(3):
@@ -239,11 +240,11 @@ def _kernel(y, ok, out_z, out_valid, out_hyp, out_r, thr, scales, n_avg, n_warm,
                 fs[_F_BASE1 + g] += b
                 ist[_S_WARM + g] += 1
         # the limiter's window: a torque near the limit, or one the check cannot read (it might be);
-        # never without a limiter (tq_open inf)
+        # never without a limiter (tq_open inf: has_limiter, set once above the loop)
         near = False
-        for e in range(2):
+        for e in range(2 if has_limiter else 0):
             v = y[j, 2 + e]
-            if tq_open < math.inf and (not (ok[j, 2 + e] and math.isfinite(v)) or v > tq_open):
+            if not (ok[j, 2 + e] and math.isfinite(v)) or v > tq_open:
                 near = True
         if near:
             ist[_S_SINCE] = 0

@@ -43,7 +43,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from fdi_sim.data import aircraft_file
+from fdi_sim.data import aircraft_file, shown_path
 from fdi_sim.errors import DesignError
 
 #: the atlas file in ``aircraft/<aircraft>/``
@@ -215,7 +215,7 @@ class Atlas:
 
     def summary(self, node: AtlasNode | None = None) -> dict[str, Any]:
         """What a log records of the atlas (and of one node)."""
-        out: dict[str, Any] = {"file": str(self.path), "aircraft": self.aircraft, "reference": self.reference,
+        out: dict[str, Any] = {"file": shown_path(self.path), "aircraft": self.aircraft, "reference": self.reference,
                                "conditions": dict(self.conditions), "training": self.training,
                                "commit": self.stamp.get("commit"), "made": self.stamp.get("date")}
         if node is not None:

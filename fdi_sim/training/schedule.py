@@ -465,6 +465,7 @@ def atlas_design(sc: Scenario) -> tuple[Scenario | None, str]:
     cover the flight (none shipped, a flight crossing several schedule points, a node or settings
     the atlas was not made for).
     """
+    from fdi_sim.data import shown_path
     from fdi_sim.training.atlas import load_atlas, scenario_digest
 
     atlas = load_atlas(sc.aircraft)
@@ -501,7 +502,7 @@ def atlas_design(sc: Scenario) -> tuple[Scenario | None, str]:
         return None, f"{atlas.path}: {where} has no calibration ({node.status})"
     told = sc.model.atmosphere.turbulence
     flights = f"{atlas.reference}'s maneuvers, as the flight's" if des.maneuvers else "no maneuvers, as the flight"
-    return des, (f"calibrated design of {atlas.path} at {where} (training flights: {flights}, no wind, noise "
+    return des, (f"calibrated design of {shown_path(atlas.path)} at {where} (training flights: {flights}, no wind, noise "
                  f"scale 1; {atlas.training}; the turbulence level is the scenario's"
                  + ("" if told == level else f" ({told}: the atlas's nearest level below)") + ")")
 

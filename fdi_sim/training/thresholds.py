@@ -20,6 +20,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from fdi_sim import __version__
+from fdi_sim.data import shown_path
 from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
 from fdi_sim.bank.members import design_hash
@@ -82,7 +83,7 @@ def design_node(sc: Scenario) -> dict[str, Any]:
 
 def note_no_match(sc: Scenario, path: Path) -> str:
     n = design_node(sc)
-    return (f"thresholds = \"default\": {path} does not cover this bank's design (h {n['h_ft']:g} ft, vc "
+    return (f"thresholds = \"default\": {shown_path(path)} does not cover this bank's design (h {n['h_ft']:g} ft, vc "
             f"{n['vc_kts']:g} kt, {n['turbulence']} turbulence): trained thresholds")
 
 
@@ -158,7 +159,7 @@ def apply_study_thresholds(sc: Scenario, bank: Any, path: Path, *, explicit: boo
                             f"to the file's design (e.g. design = {{ point = \"grid\", turbulence = \"{t.design_turbulence}\" }} "
                             "at a point of that node), or calibrate a study at this bank's design with "
                             "`fdi-sim study STUDY --calibrate OUT.toml`")
-    rec = {"source": "study", "file": str(path), "study": t.study, "study_identity": t.study_identity,
+    rec = {"source": "study", "file": shown_path(path), "study": t.study, "study_identity": t.study_identity,
            "runs": t.runs, "flight_h": t.flight_h, "design_hash": t.design_hash, "far_per_h": t.far_per_h,
            "matched_by": matched, "members": []}
     for mem, m in zip(bank.members, t.members):
