@@ -21,6 +21,18 @@ from fdi_sim.training.flights import fly_training, training_seeds
 
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = sorted(p.stem for p in (ROOT / "scenarios").glob("*.toml"))
+#: a faulty flight flies the Python loop in both modes (the fault injector works on lists), so its byte
+#: comparison checks one loop against itself and the fallback's message: one per aircraft in the default
+#: run, the rest with the long studies (make test-slow; six of them cost about 3 min of the suite)
+FAULTY_KEPT = {"f16_engine_flameout", "dhc6_engine_flameout"}
+
+
+def _shipped_params() -> list:
+    out = []
+    for name in SHIPPED:
+        faulty = "[[faults]]" in (ROOT / "scenarios" / f"{name}.toml").read_text()
+        out.append(pytest.param(name, marks=pytest.mark.slow) if faulty and name not in FAULTY_KEPT else name)
+    return out
 
 
 def _digest(path: Path) -> str:
@@ -36,7 +48,7 @@ def _both(monkeypatch, tmp_path: Path, sc, flyer=fly):
     return out
 
 
-@pytest.mark.parametrize("name", SHIPPED)
+@pytest.mark.parametrize("name", _shipped_params())
 def test_every_shipped_scenario_logs_the_same_bytes(monkeypatch, tmp_path, name) -> None:
     sc = load(ROOT / "scenarios" / f"{name}.toml")
     out = _both(monkeypatch, tmp_path, sc)
