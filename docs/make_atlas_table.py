@@ -23,7 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from fdi_sim.bank.members import DEFAULT_BANKS  # noqa: E402
+from fdi_sim.bank.members import DEFAULT_BANKS, default_member_far_per_h  # noqa: E402
 from fdi_sim.scenario.schema import FdiSection  # noqa: E402
 from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 from fdi_sim.training.atlas import read_atlas  # noqa: E402
@@ -87,7 +87,8 @@ def render() -> str:
                              f"| {rng('kalman-gust-v1')} | {rng('kinematic-airspeed-v1')} |")
     lines.append("")
     far_per_h = FdiSection.model_fields["far_per_h"].default
-    split = "; ".join(f"{ac}: {len(DEFAULT_BANKS[ac])}, {far_per_h / len(DEFAULT_BANKS[ac]):.3g} per h each" for ac in AIRCRAFT)
+    member = default_member_far_per_h()
+    split = "; ".join(f"{ac}: {len(DEFAULT_BANKS[ac])}, {member[ac]:.3g} per h each" for ac in AIRCRAFT)
     lines.append("Per node: " + read_atlas(ROOT / "aircraft" / AIRCRAFT[0] / "fdi_atlas.json").training
                  + f", no wind, sensor-noise scale 1; thresholds at the bank's {far_per_h:g} false alarms per flight hour "
                  f"split evenly over its members ({split}).")

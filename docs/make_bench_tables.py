@@ -104,8 +104,8 @@ def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict
                      "flight_h": sum(float(r.get("flight_h", 0.0)) for r in recs),
                      "this_call": {"flown": o.flown, "wall_s": time.perf_counter() - t0, "flight_h": o.flight_h},
                      "calls": read_calls(folder), "design_far_per_h": float(bank.fdi["far_per_h"]),
-                     "members": len(bank.detectors) or "/".join(sorted({str(len(v)) for v in DEFAULT_BANKS.values()}))
-                     + ("" if bank.detectors else " per aircraft")}
+                     "members": (f"those designed at each point, of the {len(bank.detectors)} registered" if bank.detectors
+                                 else "/".join(sorted({str(len(v)) for v in DEFAULT_BANKS.values()})) + " per aircraft")}
     return out
 
 
@@ -123,9 +123,13 @@ def _leaderboard(flown: dict[str, dict]) -> str:
         r = d["result"]
         subsets = [k for k in r["scored"] if k.startswith("aircraft:")]
         # the default banks in one table (their rows name the aircraft's bank); every detector in one
-        # table per aircraft (seventeen methods twice would bury the comparison that matters)
-        tables = [rank([row for sub in subsets for row in result_rows(r, sub)])] if name == "default" else \
-            [rank(result_rows(r, sub)) for sub in subsets]
+        # table per aircraft, under a line saying which (sixteen methods twice would bury the comparison)
+        if name == "default":
+            tables = [("", rank([row for sub in subsets for row in result_rows(r, sub)]))]
+        else:
+            tables = [(f"{AIRCRAFT_LABELS[sub]}: {r['scored'][sub]['bank']['cases']} cases, "
+                       f"{r['scored'][sub]['bank']['exposure_h']:.1f} h of exposure outside the fault windows.",
+                       rank(result_rows(r, sub))) for sub in subsets]
         nc, dep = r["not_scored"], r["departed"]
         parts += [f"**{'Default banks' if name == 'default' else 'Every registered detector'}**, {d['caption']}; "
                   f"design rate {d['design_far_per_h']:g} false alarms per flight hour per bank, split over its "
@@ -134,12 +138,8 @@ def _leaderboard(flown: dict[str, dict]) -> str:
                   f"departure: {_departures(dep)})"
                   + (f"; {len(nc)} not scored ({', '.join(sorted({x['status'] for x in nc}))}: "
                      f"{', '.join(x['case'] for x in nc[:4])}{'...' if len(nc) > 4 else ''})" if nc else "") + ".", ""]
-        for sub, rows in zip(subsets if name != "default" else [None], tables):
-            if sub is not None:
-                a = r["scored"][sub]["bank"]
-                parts += [f"{AIRCRAFT_LABELS[sub]}: {a['cases']} cases, {a['exposure_h']:.1f} h of exposure outside the fault "
-                          "windows.", ""]
-            parts += [leaderboard_markdown(rows), ""]
+        for heading, rows in tables:
+            parts += ([heading, ""] if heading else []) + [leaderboard_markdown(rows), ""]
     parts.append(f"ALFA's RLS (Keipour et al. 2019): precision {ALFA_RLS['precision']:.2%}, recall "
                  f"{ALFA_RLS['recall']:.2%}, mean detection time {ALFA_RLS['mean_detection_time_s']:g} s. \"beats\": "
                  "both the precision and the recall above it on the ALFA criterion here, in brackets the fault classes "

@@ -32,13 +32,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from fdi_sim.bank.members import DEFAULT_BANKS  # noqa: E402
+from fdi_sim.bank.members import DEFAULT_BANKS, default_member_far_per_h  # noqa: E402
 from fdi_sim.decision.intervals import clopper_pearson  # noqa: E402
 from fdi_sim.decision.tail import MAX_EXTRAPOLATION, TAIL_EPISODES, confident_episode_threshold  # noqa: E402
 from fdi_sim.decision.tail_truth import TRANSFORMS, Ar1Statistic, ar1_flights, episode_rate_curve  # noqa: E402
 from fdi_sim.errors import DesignError  # noqa: E402
 from fdi_sim.seeds import seeds  # noqa: E402
-from fdi_sim.scenario.schema import FdiSection  # noqa: E402
 from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
 
 INPUTS = ("fdi_sim/decision/tail.py", "fdi_sim/decision/tail_truth.py", "fdi_sim/bank/members.py",
@@ -46,7 +45,7 @@ INPUTS = ("fdi_sim/decision/tail.py", "fdi_sim/decision/tail_truth.py", "fdi_sim
 N_FLIGHTS, FLIGHT_S = 24, 300.0
 TRAINING_H = N_FLIGHTS * FLIGHT_S / 3600.0
 #: per aircraft: the default bank's per-member target [1/h], the default ``far_per_h`` split evenly
-MEMBER_TARGETS_PER_H = {ac: FdiSection.model_fields["far_per_h"].default / len(bank) for ac, bank in DEFAULT_BANKS.items()}
+MEMBER_TARGETS_PER_H = default_member_far_per_h()
 #: targets [1/h]: nominal extrapolations 25 x, 250 x, 2,500 x, 8,333 x (just inside MAX_EXTRAPOLATION,
 #: counted from the fitted level's own rate, about 50-55 per h), then every member target not among
 #: them (appended: a target's index seeds its trials, so the earlier rows keep their draws)

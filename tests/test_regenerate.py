@@ -57,8 +57,19 @@ def test_a_stale_block_is_found_with_its_command(tmp_path):
     assert rg.stale(tmp_path) == [("python docs/make_t.py", "t.md [blk]")]
 
 
-def test_the_queue_reads_the_repository():
-    """Every stale block of the checkout names a docs script (none when nothing is stale)."""
+def test_every_stamp_of_the_checkout_names_a_script_the_queue_can_run():
+    """Every stamp of the repository's generated files (stale or not, so the check has something to
+    check on a clean checkout) names an existing docs script, and the queue turns it into a command."""
+    from fdi_sim.stamp import file_stamps, generated_files
+
     rg = _module()
-    for cmd in rg.commands(rg.stale()):
-        assert cmd.startswith("python docs/make_")
+    stamps = [(f, s) for f in generated_files(ROOT) for s in file_stamps(f)]
+    assert len(stamps) > 30, len(stamps)
+    for f, s in stamps:
+        script = s.command.split()[1]
+        assert s.command.startswith("python docs/make_") and (ROOT / script).is_file(), (f.name, s.id, s.command)
+    queue = rg.commands([(s.command, f"{f.name} [{s.id}]") for f, s in stamps])
+    assert sum(len(b) for b in queue.values()) == len(stamps)
+    for cmd in queue:
+        argv = rg.argv_of(cmd, Path("/tmp/out"), 2)
+        assert (ROOT / argv[1]).is_file(), argv

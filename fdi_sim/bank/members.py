@@ -3,7 +3,7 @@
 ``[fdi] bank = "default"`` gives every aircraft the detectors ``docs/detectors.md`` finds working
 on it (:data:`DEFAULT_BANKS`); ``[[detectors]]`` entries add any registered detector, built in or
 a plugin (they replace a default member of the same id). The bank's design false-alarm rate is
-split evenly over its members (:func:`per_sample_target`, a union bound).
+split evenly over its members (:func:`member_far_per_h`, :func:`per_sample_target`: a union bound).
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from typing import Any
 from fdi_sim import registry
 from fdi_sim.errors import ScenarioError
 from fdi_sim.scenario import Scenario
+from fdi_sim.scenario.schema import FdiSection
 from fdi_sim.units import S_PER_H
 
 #: the detectors a new user gets, per aircraft (``docs/detectors.md``: the ones that work on it)
@@ -79,10 +80,23 @@ def bank_members(sc: Scenario) -> list[MemberSpec]:
     return out
 
 
+def member_far_per_h(far_per_h: float, n_detectors: int) -> float:
+    """``far_per_h / n_detectors``: each member's alarm episodes per flight hour that keep the bank's
+    below ``far_per_h`` (a union bound) [1/h]."""
+    return float(far_per_h) / max(1, n_detectors)
+
+
 def per_sample_target(far_per_h: float, n_detectors: int, rate_hz: float) -> float:
     """``far_per_h / (n_detectors rate_hz 3600)``: each detector's per-sample exceedance probability
     that keeps the bank's alarm onsets below ``far_per_h`` per flight hour (union bound)."""
     return float(far_per_h) / (max(1, n_detectors) * float(rate_hz) * S_PER_H)
+
+
+def default_member_far_per_h() -> dict[str, float]:
+    """Per aircraft, the member target of its default bank at the default ``[fdi] far_per_h`` [1/h]:
+    what the tail method must hold where the default banks use it (``docs/tail_coverage.md``)."""
+    far = FdiSection.model_fields["far_per_h"].default
+    return {ac: member_far_per_h(far, len(ids)) for ac, ids in DEFAULT_BANKS.items()}
 
 
 def design_hash(bank: Any) -> str:

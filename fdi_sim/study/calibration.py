@@ -32,6 +32,7 @@ from fdi_sim import __version__
 from fdi_sim.decision.intervals import detectable_ratio, interval_verdict, poisson_rate_interval, rate_verdict
 from fdi_sim.errors import StudyError
 from fdi_sim.decision.outcome import LATE_GRACE_S
+from fdi_sim.bank.members import member_far_per_h
 from fdi_sim.bank.thresholds_file import HeldRate, StudyMemberThreshold, StudyThresholds
 from fdi_sim.decision.persistence import k_of_n
 from fdi_sim.study.rescore import (SCALE_NUDGE, _outside, _runs, exceedances, persistence_level,
@@ -470,7 +471,7 @@ def calibrate_study(out_dir: str | Path, *, far_per_h: float | None = None, spli
                              f"{logged[mem.id]!r}, the bank rebuilt here has {flown!r} (another cache, version or "
                              "sensor suite)", "calibrate with the FDI_SIM_CACHE and fdi-sim version that flew the "
                              "study, or fly it again")
-        target = far / n_m
+        target = member_far_per_h(far, n_m)
         cal = tail_calibrate_threshold(fit, out, mem.id, target, rng, level=THRESHOLD_CONFIDENCE,
                                        power=getattr(mem.stream, "tail_power", None),
                                        heavy=getattr(mem.stream, "tail_heavy", True))
@@ -506,7 +507,7 @@ def format_thresholds(t: StudyThresholds) -> str:
 
     lines = [f"calibration study {t.study} ({t.study_identity}): {t.runs} runs, {t.flight_h:.1f} h, {t.aircraft} bank at "
              f"h {t.design_h_ft:g} ft, vc {t.design_vc_kts:g} kt, {t.design_turbulence} turbulence; target "
-             f"{t.far_per_h:g} per h for the bank, {t.far_per_h / max(1, len(t.members)):.3g} per member; "
+             f"{t.far_per_h:g} per h for the bank, {member_far_per_h(t.far_per_h, len(t.members)):.3g} per member; "
              f"calibrated on the {t.split} runs",
              f"{'member':26} {'trained':>10} {'study':>10} {'scale':>6}  {'calibration half':34}  held-out half"]
     for m in t.members:

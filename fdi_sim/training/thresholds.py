@@ -23,7 +23,7 @@ from fdi_sim import __version__
 from fdi_sim.data import shown_path
 from fdi_sim.errors import DesignError, ScenarioError
 from fdi_sim.scenario import Scenario
-from fdi_sim.bank.members import design_hash
+from fdi_sim.bank.members import design_hash, member_far_per_h
 from fdi_sim.bank.thresholds_file import DEFAULT_THRESHOLDS, shipped_thresholds_path
 from fdi_sim.bank.turbulence import (
     NOISE_COVER, NOISE_EXPONENTS, REFERENCE_QUANTILE, TAU_S, EstimateSpec, estimate_spec, power_schedule,
@@ -290,7 +290,7 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
                     if episodes:
                         series[i].append(persistence_series(st, ok, d.k, d.n))
                         hours[i].append(float(ok.sum()) / (float(f.rate_hz) * S_PER_H))
-            rate = float(f.far_per_h) / max(1, len(bank.members))
+            rate = member_far_per_h(f.far_per_h, len(bank.members))
             rec = {"p_per_sample": p, "episodes_per_h": rate if episodes else None,
                    "confidence": THRESHOLD_CONFIDENCE, "members": []}
             if departed:

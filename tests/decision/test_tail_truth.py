@@ -15,12 +15,11 @@ from fdi_sim.decision.tail_truth import (
     episode_rate_curve,
     simulate_episode_rate,
 )
-from fdi_sim.bank.members import DEFAULT_BANKS
+from fdi_sim.bank.members import default_member_far_per_h
 from fdi_sim.errors import DesignError
-from fdi_sim.scenario.schema import FdiSection
 
 #: the smallest per-member target of the default banks [1/h]: the default far_per_h over the largest bank
-MEMBER_TARGET_PER_H = FdiSection.model_fields["far_per_h"].default / max(len(b) for b in DEFAULT_BANKS.values())
+MEMBER_TARGET_PER_H = min(default_member_far_per_h().values())
 
 
 def test_one_of_one_matches_the_bivariate_normal():
