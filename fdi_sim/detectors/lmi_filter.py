@@ -27,8 +27,10 @@ The runtime :class:`LmiDetectionFilter` discretizes the continuous observer (zer
 """
 from __future__ import annotations
 
+import hashlib
 import time
 import warnings
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Literal
 
@@ -290,6 +292,26 @@ def _solve_information_form(A: Array, C: Array, x: Array, G: Array, h: float, ep
     return status, val, P, W, np.array([[lam_best]])
 
 
+#: solved designs by their inputs (:func:`_gain_key`), the most recent :data:`MEMO_SIZE`: the SDP line
+#: search costs 3-4 s and a study worker designs the same filter for every run of a design point (an
+#: every-detector bench run spent more on it than on its flight, session 22); the solution is a
+#: function of its inputs only, so a repeat returns the same design
+_GAIN_MEMO: OrderedDict[str, LmiFilterDesign] = OrderedDict()
+MEMO_SIZE = 32
+
+
+def _gain_key(arrays: tuple[NDArray | None, ...], options: tuple[object, ...]) -> str:
+    h = hashlib.sha256(repr(options).encode())
+    for a in arrays:
+        if a is None:
+            h.update(b"none")
+            continue
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
 def lmi_detection_gain(
     A: NDArray,
     C: NDArray,
@@ -354,7 +376,31 @@ def lmi_detection_gain(
     DesignError
         Bad shapes or values, unobservable ``(A, C)``, infeasible or unsolved LMI, or a solution
         that fails any numerical check (the message gives the failing numbers).
+
+    Notes
+    -----
+    A solved design is kept in memory (the last :data:`MEMO_SIZE`, keyed by every input's bits) and
+    returned again, read-only, for the same inputs; a refusal is not kept.
     """
+    key = _gain_key((A, C, X_cl, G, V, x0, omega_radps), (float(h_radps), float(epsilon), method, solver,
+                                                          int(n_lambda), float(margin)))
+    if key in _GAIN_MEMO:
+        _GAIN_MEMO.move_to_end(key)
+        return _GAIN_MEMO[key]
+    design = _solve_gain(A, C, X_cl, G, V, h_radps, epsilon, method, x0, omega_radps, solver, n_lambda, margin)
+    for v in vars(design).values():  # shared by every later caller: nobody may change it in place
+        if isinstance(v, np.ndarray):
+            v.flags.writeable = False
+    _GAIN_MEMO[key] = design
+    while len(_GAIN_MEMO) > MEMO_SIZE:
+        _GAIN_MEMO.popitem(last=False)
+    return design
+
+
+def _solve_gain(A: NDArray, C: NDArray, X_cl: NDArray, G: NDArray, V: NDArray, h_radps: float, epsilon: float,
+                method: Method, x0: NDArray | None, omega_radps: NDArray | None, solver: str, n_lambda: int,
+                margin: float) -> LmiFilterDesign:
+    """:func:`lmi_detection_gain` without its memo."""
     A, C = np.asarray(A, float), np.asarray(C, float)
     n, m = A.shape[0], C.shape[0]
     X = np.asarray(X_cl, float).reshape(n, -1)

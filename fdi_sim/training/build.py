@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -192,14 +193,66 @@ def _continuous_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
 def _pca_stream(ctx: MemberContext, m: MemberSpec) -> tuple[Any, str]:
     """pca-v1: its residual space is learned from data, the first fault-free training flight (the
     same flights the thresholds are set on; the detector card trains it the same way)."""
+    return _model_stream(ctx, m, extra=_pca_training(ctx))
+
+
+def _pca_training(ctx: MemberContext) -> dict[str, np.ndarray]:
+    """pca-v1's training data: the first fault-free training flight's inputs and outputs at the
+    bank's rate, ``{"train_u": (N, m), "train_y": (N, p)}`` in absolute units, cached on disk when
+    the flights are the scenario's own (:class:`~fdi_sim.training.flights.LazyTraining`). Why: with
+    its thresholds cached, a bank with pca-v1 still flew all its training flights for this one (17 s
+    of the set-up of an F-16 run with 3.3 s of flight). Given training logs (a card's) are used as
+    they are, not cached."""
     from fdi_sim.detectors.samples import log_samples
+    from fdi_sim.training.cache import cache_dir, cache_lock
 
     model = ctx.model()
-    first = next(iter(ctx.training_logs))
-    s = log_samples(first, model, float(ctx.sc.model.fdi.rate_hz))
-    cols = [list(model.input_names).index(nm) for nm in s.input_names]
-    u_abs = s.du + np.asarray(model.u0, dtype=float)[cols]
-    return _model_stream(ctx, m, extra={"train_u": u_abs, "train_y": s.dy + s.y0})
+
+    def arrays() -> dict[str, np.ndarray]:
+        first = next(iter(ctx.training_logs))
+        s = log_samples(first, model, float(ctx.sc.model.fdi.rate_hz))
+        cols = [list(model.input_names).index(nm) for nm in s.input_names]
+        return {"train_u": s.du + np.asarray(model.u0, dtype=float)[cols], "train_y": s.dy + s.y0}
+
+    if not isinstance(ctx.training_logs, LazyTraining):
+        return arrays()
+    path = cache_dir() / f"pca-train-{_pca_training_key(ctx.sc, model)}.npz"
+    with cache_lock(path):  # a study's other worker making the same entry: wait, then read it
+        try:
+            with np.load(path) as z:
+                return {"train_u": z["train_u"], "train_y": z["train_y"]}
+        except (OSError, ValueError, KeyError):  # absent or damaged: made again
+            pass
+        out = arrays()
+        try:  # committed by rename: a crash leaves no half-written entry; an unwritable cache costs the flights
+            tmp = path.with_name(f"{path.stem}.tmp{os.getpid()}.npz")
+            np.savez(tmp, **out)
+            os.replace(tmp, path)
+        except OSError:
+            pass
+    return out
+
+
+def _pca_training_key(sc: Scenario, model: Any) -> str:
+    """What pca-v1's training data depends on: the fault-free training scenario (as the thresholds'
+    key has it), the training seeds and length, the bank's rate, the sensor suite file, the model the
+    samples are taken against (matrices, operating point, signal names) and the package version."""
+    from fdi_sim import __version__
+    from fdi_sim.sensors.suite import suite_path
+    from fdi_sim.training.flights import fault_free, training_seeds
+
+    f = sc.model.fdi
+    ff = json.loads(fault_free(sc, 0, f.calibration_duration_s).to_json())
+    for k in ("name", "description"):
+        ff.pop(k, None)
+    h = hashlib.sha256()
+    for a in (model.A, model.B, model.C, model.D, model.u0, model.y0):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    parts = {"scenario": ff, "seeds": list(training_seeds(f.calibration_flights)), "T": f.calibration_duration_s,
+             "rate_hz": float(f.rate_hz), "suite": Path(suite_path(sc.aircraft, sc.model.sensors.suite)).read_text(),
+             "names": [list(model.input_names), list(model.output_names)], "model": h.hexdigest(),
+             "version": __version__}
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:24]
 
 
 def _model_stream(ctx: MemberContext, m: MemberSpec, *, design_model: Any = None,

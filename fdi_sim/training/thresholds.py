@@ -237,9 +237,10 @@ def _thresholds_atlas_key(sc: Scenario, bank: Any, p: float) -> tuple[str, list[
 class MemberThresholdError(DesignError):
     """One member's threshold cannot be set on the training flights (``member`` names it)."""
 
-    def __init__(self, member: str, message: str) -> None:
-        super().__init__(message)
-        self.member = member
+    def __init__(self, member: str, source: str, reason: str) -> None:
+        super().__init__(f"{source}: {reason}")
+        self.member, self.reason = member, reason  # the reason without the source: a cached refusal is said
+        # again with the source of the scenario that meets it
 
 
 def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Sequence[Any] | None = None,
@@ -251,12 +252,9 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
 
     Returns the record stored in the cache (thresholds, method, training samples per member).
     """
-    from fdi_sim.decision.tail import confident_episode_threshold, confident_tail_threshold, persistence_series
     from fdi_sim.training.atlas import lookup as atlas_lookup, record as atlas_record
     from fdi_sim.training.cache import cache_lock, read_entry, write_entry
-    from fdi_sim.training.flights import fly_training, training_seeds
 
-    f = sc.model.fdi
     key = _thresholds_key(sc, bank, p)
     path = _cache_path(key)
     with cache_lock(path, use_cache):  # another process computing this entry: wait, then read it
@@ -264,7 +262,10 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
         try:
             if rec is not None and [r["id"] for r in rec["members"]] != [m.id for m in bank.members]:
                 rec = None
-        except (KeyError, TypeError):
+            if rec is not None and rec.get("refused"):  # a member without a threshold, found by an earlier
+                r = rec["refused"]  # build: said again, not replayed again
+                raise MemberThresholdError(str(r["member"]), sc.source, str(r["reason"]))
+        except (KeyError, TypeError, AttributeError):
             rec = None  # a damaged entry is recomputed
         akey, afp = _thresholds_atlas_key(sc, bank, p)
         if rec is None and use_cache:  # the shipped atlas: the same entry, made by the project
@@ -272,57 +273,12 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
             if hit is not None and [r.get("id") for r in hit["entry"].get("members", [])] == [m.id for m in bank.members]:
                 rec = {**hit["entry"], "atlas": hit["atlas"]}  # not copied to the cache: the atlas may be remade
         if rec is None:
-            logs = training_logs
-            if logs is None:
-                logs = fly_training(sc, training_seeds(f.calibration_flights), f.calibration_duration_s, progress=progress)
-            src, logs = logs, list(logs)
-            departed = tuple(getattr(src, "departed", ()))  # flights replaced by spares (fly_training)
-            d = bank.decision
-            episodes = d.rule == "persistence"  # the angle rule's exceedance also needs a direction
-            stats: list[list[np.ndarray]] = [[] for _ in bank.members]
-            series: list[list[np.ndarray]] = [[] for _ in bank.members]
-            hours: list[list[float]] = [[] for _ in bank.members]
-            for lg in logs:
-                _replay_log(bank, lg, raw_thresholds=True)
-                for i, mem in enumerate(bank.members):
-                    st, ok = mem.trace_series()
-                    stats[i].append(st[ok])
-                    if episodes:
-                        series[i].append(persistence_series(st, ok, d.k, d.n))
-                        hours[i].append(float(ok.sum()) / (float(f.rate_hz) * S_PER_H))
-            rate = member_far_per_h(f.far_per_h, len(bank.members))
-            rec = {"p_per_sample": p, "episodes_per_h": rate if episodes else None,
-                   "confidence": THRESHOLD_CONFIDENCE, "members": []}
-            if departed:
-                rec["training_departed"] = [[int(seed), str(reason)] for seed, reason in departed]
-            rng = np.random.default_rng(0)  # the bootstrap's resampling: fixed, so a calibration is reproducible
-            for i, (mem, s) in enumerate(zip(bank.members, stats)):
-                s = [x[np.isfinite(x)] for x in s]
-                x = np.concatenate(s)
-                if x.size < 2:
-                    raise MemberThresholdError(mem.id, f"{sc.source}: {mem.id} gave {x.size} valid statistic samples on its "
-                                      f"{len(logs)} fault-free training flights (armed from {f.arm_s:g} s): no "
-                                      "threshold can be set; its design does not settle on this aircraft")
-                if episodes:
-                    try:
-                        thr, method = confident_episode_threshold(series[i], rate, hours[i], rng,
-                                                                  level=THRESHOLD_CONFIDENCE,
-                                                                  power=getattr(mem.stream, "tail_power", None),
-                                                                  heavy=getattr(mem.stream, "tail_heavy", True))
-                    except DesignError as e:  # short training flights: too few episodes to fit
-                        thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
-                        method = f"per-sample ({e}): {method}"
-                else:
-                    thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
-                if not math.isfinite(thr):  # a statistic that diverges on fault-free flights has no level
-                    raise MemberThresholdError(mem.id, f"{sc.source}: {mem.id} has no finite threshold on its "
-                                               f"{len(logs)} fault-free training flights ({method}; statistic up "
-                                               f"to {float(x.max()):.3g}): it diverges on this aircraft here")
-                rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
-                                       "max_training": float(x.max()) if x.size else None})
-            spec = estimate_spec(sc.aircraft)
-            if spec is not None and spec.signal in bank.meas_names:  # where rougher air begins (power_schedule)
-                rec["turbulence_reference"] = turbulence_reference(bank, logs, f"{len(logs)} training flights", spec)
+            try:
+                rec = _calibrated(sc, bank, p, training_logs, progress)
+            except MemberThresholdError as exc:  # kept, so the next build of this bank does not replay again
+                write_entry(path, {"members": [{"id": m.id} for m in bank.members],
+                                   "refused": {"member": exc.member, "reason": exc.reason}}, use_cache)
+                raise
             write_entry(path, rec, use_cache)
     atlas_record("bank", akey, afp, {k: v for k, v in rec.items() if k != "atlas"})
     for mem, r in zip(bank.members, rec["members"]):
@@ -331,6 +287,74 @@ def calibrate_thresholds(sc: Scenario, bank: Any, p: float, *, training_logs: Se
     bank.calibration = rec
     bank.keep_trace(False)  # the replays kept every block; a flight must not
     bank.reset()
+    return rec
+
+
+def _calibrated(sc: Scenario, bank: Any, p: float, training_logs: Sequence[Any] | None,
+                progress: bool) -> dict[str, Any]:
+    """:func:`calibrate_thresholds`'s cache record, computed: the bank replayed over the training
+    flights (flown here when not given) and each member's threshold fitted.
+
+    Raises
+    ------
+    MemberThresholdError
+        A member with fewer than two valid samples, or without a finite threshold.
+    """
+    from fdi_sim.decision.tail import confident_episode_threshold, confident_tail_threshold, persistence_series
+    from fdi_sim.training.flights import fly_training, training_seeds
+
+    f = sc.model.fdi
+    logs = training_logs
+    if logs is None:
+        logs = fly_training(sc, training_seeds(f.calibration_flights), f.calibration_duration_s, progress=progress)
+    src, logs = logs, list(logs)
+    departed = tuple(getattr(src, "departed", ()))  # flights replaced by spares (fly_training)
+    d = bank.decision
+    episodes = d.rule == "persistence"  # the angle rule's exceedance also needs a direction
+    stats: list[list[np.ndarray]] = [[] for _ in bank.members]
+    series: list[list[np.ndarray]] = [[] for _ in bank.members]
+    hours: list[list[float]] = [[] for _ in bank.members]
+    for lg in logs:
+        _replay_log(bank, lg, raw_thresholds=True)
+        for i, mem in enumerate(bank.members):
+            st, ok = mem.trace_series()
+            stats[i].append(st[ok])
+            if episodes:
+                series[i].append(persistence_series(st, ok, d.k, d.n))
+                hours[i].append(float(ok.sum()) / (float(f.rate_hz) * S_PER_H))
+    rate = member_far_per_h(f.far_per_h, len(bank.members))
+    rec = {"p_per_sample": p, "episodes_per_h": rate if episodes else None,
+           "confidence": THRESHOLD_CONFIDENCE, "members": []}
+    if departed:
+        rec["training_departed"] = [[int(seed), str(reason)] for seed, reason in departed]
+    rng = np.random.default_rng(0)  # the bootstrap's resampling: fixed, so a calibration is reproducible
+    for i, (mem, s) in enumerate(zip(bank.members, stats)):
+        s = [x[np.isfinite(x)] for x in s]
+        x = np.concatenate(s)
+        if x.size < 2:
+            raise MemberThresholdError(mem.id, sc.source, f"{mem.id} gave {x.size} valid statistic samples on its "
+                              f"{len(logs)} fault-free training flights (armed from {f.arm_s:g} s): no "
+                              "threshold can be set; its design does not settle on this aircraft")
+        if episodes:
+            try:
+                thr, method = confident_episode_threshold(series[i], rate, hours[i], rng,
+                                                          level=THRESHOLD_CONFIDENCE,
+                                                          power=getattr(mem.stream, "tail_power", None),
+                                                          heavy=getattr(mem.stream, "tail_heavy", True))
+            except DesignError as e:  # short training flights: too few episodes to fit
+                thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
+                method = f"per-sample ({e}): {method}"
+        else:
+            thr, method = confident_tail_threshold(s, p, rng, level=THRESHOLD_CONFIDENCE)
+        if not math.isfinite(thr):  # a statistic that diverges on fault-free flights has no level
+            raise MemberThresholdError(mem.id, sc.source, f"{mem.id} has no finite threshold on its "
+                                       f"{len(logs)} fault-free training flights ({method}; statistic up "
+                                       f"to {float(x.max()):.3g}): it diverges on this aircraft here")
+        rec["members"].append({"id": mem.id, "threshold": thr, "method": method, "samples": int(x.size),
+                               "max_training": float(x.max()) if x.size else None})
+    spec = estimate_spec(sc.aircraft)
+    if spec is not None and spec.signal in bank.meas_names:  # where rougher air begins (power_schedule)
+        rec["turbulence_reference"] = turbulence_reference(bank, logs, f"{len(logs)} training flights", spec)
     return rec
 
 

@@ -166,3 +166,27 @@ def test_lmi_on_the_linearizer_model() -> None:
     d = design_lmi_filter(m, FAULT, V_TWIN, H_RADPS, epsilon=1e-7)
     _independent_checks(m, d)
     assert d.alignment_error_deg < 2.0  # measured 0.88 deg
+
+
+def test_a_repeated_design_is_the_same_solution_read_only(model, ls_design, direct_design) -> None:
+    """The solve is kept by its inputs (a study worker designs the same filter for every run of a
+    point): the same inputs give the same design without a second solve, equal bit for bit to a
+    fresh solve, and nobody can change it in place; other inputs are solved again."""
+    import fdi_sim.detectors.lmi_filter as lf
+
+    again = design_lmi_filter(model, FAULT, V_TWIN, H_RADPS, epsilon=1e-7, method="least-squares")
+    assert again is ls_design
+    with pytest.raises(ValueError, match="read-only"):
+        again.L[0, 0] = 0.0
+    saved = dict(lf._GAIN_MEMO)
+    lf._GAIN_MEMO.clear()
+    try:
+        fresh = design_lmi_filter(model, FAULT, V_TWIN, H_RADPS, epsilon=1e-7, method="least-squares")
+    finally:
+        lf._GAIN_MEMO.clear()
+        lf._GAIN_MEMO.update(saved)
+    assert fresh is not ls_design
+    for name in ("L", "P", "W", "A_cl", "poles"):
+        assert np.array_equal(getattr(fresh, name), getattr(ls_design, name)), name
+    other = design_lmi_filter(model, FAULT, V_TWIN, H_RADPS, method="direct")  # another method: its own solve
+    assert other is direct_design and other is not ls_design

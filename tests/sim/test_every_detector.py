@@ -194,9 +194,49 @@ def test_a_member_without_a_threshold_is_refused_or_skipped(tmp_path, monkeypatc
     if on_failure == "refuse":
         with pytest.raises(DesignError, match="never-valid-v1 gave 0 valid statistic samples"):
             fly(sc, tmp_path, progress=False)
+    else:
+        res = fly(sc, tmp_path, progress=False)
+        fdi = read_log(res.log_path).metadata["fdi"]
+        assert [m["id"] for m in json.loads(fdi["members"])] == ["kinematic-attitude-v1"]
+        (note,) = [n for n in json.loads(fdi["notes"]) if n.startswith("never-valid-v1")]
+        assert "skipped, no threshold" in note
+    # the refusal is cached like a threshold: the same bank again is not replayed over its training
+    # flights (every run of a study design replayed them, 55 s of a 4 s DHC-6 every-detector run), and
+    # it is said with the source of the scenario that meets it
+    import fdi_sim.training.thresholds as thresholds
+
+    def replayed(*args, **kwargs):
+        raise AssertionError("the bank was replayed over its training flights again")
+
+    monkeypatch.setattr(thresholds, "_calibrated", replayed)
+    sc2 = loads(text, str(tmp_path / "again.toml"))
+    if on_failure == "refuse":
+        with pytest.raises(DesignError, match=r"again\.toml: never-valid-v1 gave 0 valid statistic samples"):
+            fly(sc2, tmp_path / "again", progress=False)
         return
-    res = fly(sc, tmp_path, progress=False)
-    fdi = read_log(res.log_path).metadata["fdi"]
-    assert [m["id"] for m in json.loads(fdi["members"])] == ["kinematic-attitude-v1"]
-    (note,) = [n for n in json.loads(fdi["notes"]) if n.startswith("never-valid-v1")]
-    assert "skipped, no threshold" in note
+    res2 = fly(sc2, tmp_path / "again", progress=False)
+    assert read_log(res2.log_path).metadata["fdi"]["notes"] == fdi["notes"].replace("s.toml", "again.toml")
+
+
+def test_a_study_worker_flies_a_design_again_without_training_and_the_same_bytes(flown, monkeypatch):
+    """A study's runs of one design (``fdi_sim.study.execute.fly_run``, the worker's design memo on):
+    no run flies a training flight again (thresholds and pca-v1's training data from the disk cache,
+    the LMI solve and the gust design kept in the process), and each gives the log of a run built
+    from scratch, bit for bit. Before, every run of the bench's every-detector bank rebuilt its
+    members: an F-16 run with 3.3 s of flight spent 22 s on its set-up."""
+    import fdi_sim.training.build as training_build
+    import fdi_sim.training.flights as flights
+    from fdi_sim.study.execute import fly_run
+
+    aircraft, sc, res = flown
+
+    def flew(*args, **kwargs):
+        raise AssertionError("a training flight was flown again")
+
+    monkeypatch.setattr(flights, "fly_training", flew)
+    monkeypatch.setattr(training_build, "DESIGN_MEMO", None)  # fly_run turns it on, as on a worker
+    ref = Path(res.log_path).read_bytes()
+    for _ in range(2):
+        out = fly_run(0, sc.to_json(), sc.source, 600.0, True, {})
+        assert out["record"]["status"] == "completed"
+        assert out["log"] == ref
