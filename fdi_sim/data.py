@@ -22,12 +22,20 @@ def aircraft_file(aircraft: str, name: str) -> Path:
     return AIRCRAFT_DATA / aircraft_base(aircraft) / name
 
 
+#: the package's folder (its data: ``_aircraft``, ``_scenarios``, ``_bench``)
+PACKAGE: Path = Path(__file__).resolve().parent
+
+
 def shown_path(path: Path | str) -> str:
-    """``path`` as logs and notes show it: the package's own data as ``fdi_sim/_aircraft/<aircraft>/<file>``,
-    any other file as given (a user's own). A log must not depend on where the package was checked out
-    or installed: the same seed gives the same log on every machine."""
+    """``path`` as logs and notes show it: the package's own files as ``fdi_sim/<path in the package>``
+    (``fdi_sim/_aircraft/<aircraft>/<file>``, ``fdi_sim/_bench/fdi-bench-v1.toml``), any other file as
+    given (a user's own). A log must not depend on where the package was checked out or installed: the
+    same seed gives the same log on every machine."""
     p = Path(path)
-    try:
-        return (Path("fdi_sim") / "_aircraft" / p.relative_to(AIRCRAFT_DATA)).as_posix()
-    except ValueError:
-        return str(p)
+    for root, shown in ((AIRCRAFT_DATA, "fdi_sim/_aircraft"), (PACKAGE / "_scenarios", "fdi_sim/_scenarios"),
+                        (PACKAGE, "fdi_sim")):  # the linked data folders first: they resolve outside the package
+        try:
+            return (Path(shown) / p.relative_to(root)).as_posix()
+        except ValueError:
+            continue
+    return str(p)

@@ -13,3 +13,21 @@ def test_package_data_is_shown_inside_the_package_and_a_users_file_as_given(tmp_
     own = tmp_path / "my_atlas.json"
     assert shown_path(own) == str(own)
     assert not Path(shown_path(aircraft_file("f16", "fdi_atlas.json"))).is_absolute()
+
+
+def test_a_bench_case_names_its_suite_inside_the_package():
+    """A bench case's scenario source is in every note of its log (a member skipped, a design): it
+    held the checkout's path (``/work/.../fdi_sim/_bench/fdi-bench-v1.toml case ...``), so the same
+    case gave different log bytes from two checkouts."""
+    from fdi_sim.bench.run import bench_bank, suite_study
+    from fdi_sim.bench.suite import SUITES_DIR, load_suite
+    from fdi_sim.data import PACKAGE
+
+    assert shown_path(SUITES_DIR / "fdi-bench-v1.toml") == "fdi_sim/_bench/fdi-bench-v1.toml"
+    assert shown_path(PACKAGE / "_scenarios" / "f16_cruise_doublets.toml") == "fdi_sim/_scenarios/f16_cruise_doublets.toml"
+    suite = load_suite()
+    case = suite.cases[0]
+    st = suite_study(suite, bench_bank(True), [case])
+    sc, _ = st.run_scenario(case.index)
+    assert sc.source == f"fdi_sim/_bench/fdi-bench-v1.toml case {case.case}"
+    assert str(PACKAGE) not in sc.source

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from fdi_sim.bench.errors import BenchError
+from fdi_sim.data import shown_path
 from fdi_sim.bench.suite import Case, Suite
 from fdi_sim.study.spec import OutputSection, Study, StudyModel
 
@@ -139,7 +140,7 @@ class SuiteStudy(Study):
         data["fdi"] = {**self.bank.fdi, "log_residuals": False}
         data["detectors"] = [dict(d) for d in self.bank.detectors]
         data["log"] = {"per_step": bool(self.model.output.full_logs)}  # the 120 Hz topics too (export)
-        sc = from_dict(data, source=f"{self._suite.source} case {case.case}")
+        sc = from_dict(data, source=f"{shown_path(self._suite.source)} case {case.case}")  # no checkout path in a log
         return sc, {"case": case.case, **json.loads(case.params)}
 
 

@@ -38,6 +38,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from fdi_sim.bench.errors import BenchError
+from fdi_sim.data import shown_path
 from fdi_sim.errors import ScenarioError
 from fdi_sim.units import S_PER_H
 
@@ -334,7 +335,7 @@ def _case(model: SuiteModel, src: str, gi: int, g: GroupModel, si: int, value: f
         data.pop(k, None)
     data["log"] = {"per_step": False}
     try:
-        sc = from_dict(data, source=f"{src} case {cid}")
+        sc = from_dict(data, source=f"{shown_path(src)} case {cid}")  # no checkout path in a log
     except ScenarioError as exc:
         raise BenchError(src, f"groups[{gi}] ({g.name})", f"case {cid}: the scenario is refused ({exc.problem}; "
                          f"sampled {json.dumps(params, default=str)})", exc.fix or "fix the group's values") from None
