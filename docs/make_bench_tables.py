@@ -1,18 +1,17 @@
-"""docs/bench.md's generated blocks: the suite (``bench-suite``), the leaderboard (``leaderboard``)
-and what the benchmark costs on this machine (``bench-cost``).
+"""docs/bench.md's generated blocks: the suite (``bench-suite``), the leaderboard (``leaderboard``,
+also as the page ``docs/leaderboard.html``) and what the benchmark costs on this machine (``bench-cost``).
 
-The leaderboard flies (or reuses) each bank on its selection of fdi-bench-v1 with ``fdi-sim bench
-run``'s code, into ``--out-root/<digest>/<bank>``: ``<digest>`` is the digest of the code the
-flights depend on (:data:`FLIGHT`), so a changed detector never reuses an old folder, and the
-same code resumes an interrupted regeneration without flying a case twice.
+The leaderboard flies (or reuses) each bank on its selection of the newest suite
+(:data:`fdi_sim.bench.suite.LATEST`) with ``fdi-sim bench run``'s code, into
+``--out-root/<digest>/<bank>``: ``<digest>`` is the digest of the code the flights depend on
+(:data:`FLIGHT`), so a changed detector never reuses an old folder, and the same code resumes an
+interrupted regeneration without flying a case twice.
 
     python docs/make_bench_tables.py --out-root DIR [--workers 2] [--suite-only]
 
 Banks and selections (:data:`BANKS`): the two default banks (one per aircraft, the ``default`` bank
-flies each case's own) and every registered detector side by side, each on the whole suite (the
-every-detector bank flew the test split alone while each of its runs rebuilt its members, 2,523 s
-for 200 cases; a study worker now reuses them, 758 s), with the selection in the table's caption.
-Both are ranked per aircraft: a default bank is one bank per aircraft, and a method's rate on one
+flies each case's own) and every registered detector side by side, each on the whole suite, with the
+selection in the table's caption. Both are ranked per aircraft: a default bank is one bank per aircraft, and a method's rate on one
 aircraft says nothing about the other.
 """
 from __future__ import annotations
@@ -26,10 +25,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from fdi_sim.stamp import inputs_digest, make_stamp, replace_block
+from fdi_sim.stamp import generated_block, inputs_digest, make_stamp, replace_block
 from fdi_sim.units import S_PER_H
 
 MD = ROOT / "docs" / "bench.md"
+#: the leaderboard as a page of its own (issue 27: Markdown and HTML, shipped in docs/)
+HTML = ROOT / "docs" / "leaderboard.html"
 COMMAND = "python docs/make_bench_tables.py --out-root DIR --workers 2"
 SUITE_INPUTS = ("fdi_sim/_bench", "fdi_sim/bench/suite.py", "docs/make_bench_tables.py")
 CODE = ("aircraft", "scenarios", "fdi_sim/_bench", "fdi_sim/bench", "fdi_sim/decision", "fdi_sim/bank",
@@ -109,21 +110,16 @@ def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict
     return out
 
 
-def _leaderboard(flown: dict[str, dict]) -> str:
-    from fdi_sim.bench.leaderboard import (
-        AIRCRAFT_LABELS,
-        ALFA_RLS,
-        leaderboard_markdown,
-        rank,
-        result_rows,
-    )
+def _leaderboard_parts(flown: dict[str, dict]) -> list[tuple[str, str, list]]:
+    """The leaderboard as ``(caption, heading, rows)`` per table: the default banks in one table (their
+    rows name the aircraft's bank); every detector in one table per aircraft, under a line saying which
+    (sixteen methods twice would bury the comparison). Markdown and HTML render the same parts."""
+    from fdi_sim.bench.leaderboard import AIRCRAFT_LABELS, rank, result_rows
 
     parts = []
     for name, d in flown.items():
         r = d["result"]
         subsets = [k for k in r["scored"] if k.startswith("aircraft:")]
-        # the default banks in one table (their rows name the aircraft's bank); every detector in one
-        # table per aircraft, under a line saying which (sixteen methods twice would bury the comparison)
         if name == "default":
             tables = [("", rank([row for sub in subsets for row in result_rows(r, sub)]))]
         else:
@@ -131,20 +127,55 @@ def _leaderboard(flown: dict[str, dict]) -> str:
                        f"{r['scored'][sub]['bank']['exposure_h']:.1f} h of exposure outside the fault windows.",
                        rank(result_rows(r, sub))) for sub in subsets]
         nc, dep = r["not_scored"], r["departed"]
-        parts += [f"**{'Default banks' if name == 'default' else 'Every registered detector'}**, {d['caption']}; "
-                  f"design rate {d['design_far_per_h']:g} false alarms per flight hour per bank, split over its "
-                  f"members ({d['members']}): "
-                  f"{r['cases']} cases, {r['flight_h']:.1f} flight h scored; {len(dep)} departed (scored up to the "
-                  f"departure: {_departures(dep)})"
-                  + (f"; {len(nc)} not scored ({', '.join(sorted({x['status'] for x in nc}))}: "
-                     f"{', '.join(x['case'] for x in nc[:4])}{'...' if len(nc) > 4 else ''})" if nc else "") + ".", ""]
-        for heading, rows in tables:
-            parts += ([heading, ""] if heading else []) + [leaderboard_markdown(rows), ""]
-    parts.append(f"ALFA's RLS (Keipour et al. 2019): precision {ALFA_RLS['precision']:.2%}, recall "
-                 f"{ALFA_RLS['recall']:.2%}, mean detection time {ALFA_RLS['mean_detection_time_s']:g} s. \"beats\": "
-                 "both the precision and the recall above it on the ALFA criterion here, in brackets the fault classes "
-                 "where that holds (each class's fault flights with every fault-free one).")
-    return "\n".join(parts)
+        caption = (f"{'Default banks' if name == 'default' else 'Every registered detector'}|, {d['caption']}; "
+                   f"design rate {d['design_far_per_h']:g} false alarms per flight hour per bank, split over its "
+                   f"members ({d['members']}): "
+                   f"{r['cases']} cases, {r['flight_h']:.1f} flight h scored; {len(dep)} departed (scored up to the "
+                   f"departure: {_departures(dep)})"
+                   + (f"; {len(nc)} not scored ({', '.join(sorted({x['status'] for x in nc}))}: "
+                      f"{', '.join(x['case'] for x in nc[:4])}{'...' if len(nc) > 4 else ''})" if nc else "") + ".")
+        for i, (heading, rows) in enumerate(tables):
+            parts.append((caption if i == 0 else "", heading, rows))
+    return parts
+
+
+def _alfa_note() -> str:
+    from fdi_sim.bench.leaderboard import ALFA_RLS
+
+    return (f"ALFA's RLS (Keipour et al. 2019): precision {ALFA_RLS['precision']:.2%}, recall "
+            f"{ALFA_RLS['recall']:.2%}, mean detection time {ALFA_RLS['mean_detection_time_s']:g} s. \"beats\": "
+            "both the precision and the recall above it on the ALFA criterion here, in brackets the fault classes "
+            "where that holds (each class's fault flights with every fault-free one).")
+
+
+def _leaderboard(flown: dict[str, dict]) -> str:
+    from fdi_sim.bench.leaderboard import leaderboard_markdown
+
+    out = []
+    for caption, heading, rows in _leaderboard_parts(flown):
+        if caption:
+            bold, rest = caption.split("|", 1)
+            out += [f"**{bold}**{rest}", ""]
+        out += ([heading, ""] if heading else []) + [leaderboard_markdown(rows), ""]
+    return "\n".join(out + [_alfa_note()])
+
+
+def _leaderboard_html(flown: dict[str, dict], suite: str) -> str:
+    """The same tables as :func:`_leaderboard`, for ``docs/leaderboard.html``."""
+    import html
+
+    from fdi_sim.bench.leaderboard import leaderboard_table_html
+
+    out = [f"<p>{html.escape(suite)}; the tables and how each metric is computed: docs/bench.md.</p>"]
+    for caption, heading, rows in _leaderboard_parts(flown):
+        if caption:
+            bold, rest = caption.split("|", 1)
+            out.append(f"<h2>{html.escape(bold)}</h2><p>{html.escape(rest.lstrip(', '))}</p>")
+        if heading:
+            out.append(f"<h3>{html.escape(heading)}</h3>")
+        out.append(leaderboard_table_html(rows))
+    out.append(f"<p>{html.escape(_alfa_note())}</p>")
+    return "\n".join(out)
 
 
 def _by_group(flown: dict[str, dict]) -> str:
@@ -244,6 +275,14 @@ def main(argv: list[str] | None = None) -> int:
         flown = _fly(args.out_root, args.workers, banks)
         command = COMMAND + ("" if args.banks == a.get_default("banks") else f" --banks {','.join(banks)}")
         text = replace_block(text, make_stamp("leaderboard", command, CODE), _leaderboard(flown))
+        if set(flown) == {b for b, _, _ in BANKS}:  # the page holds every bank's tables, or is not rewritten
+            from fdi_sim.bench.leaderboard import html_page
+            from fdi_sim.bench.suite import load_suite
+
+            su = load_suite()
+            HTML.write_text(html_page(generated_block(make_stamp("leaderboard-html", command, CODE),
+                                                      _leaderboard_html(flown, f"{su.name}, hash {su.hash[:16]}..."))))
+            print(f"wrote {HTML}")
         if "default" in flown:
             text = replace_block(text, make_stamp("bench-by-group", command, CODE), _by_group(flown))
         text = replace_block(text, make_stamp("bench-cost", command, CODE), _cost(flown, args.workers))

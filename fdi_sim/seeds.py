@@ -131,8 +131,9 @@ REGISTRY: tuple[SeedSet, ...] = (
             "the small DHC-6 calibration study of the thresholds-file tests (mechanics, not a verdict)"),
     SeedSet("test-validation", "validation", (24,), ("tests/study/test_calibration.py",),
             "the small fresh study that validates that file in the same tests (mechanics, not a verdict)"),
-    SeedSet("fdi-bench", "benchmark", (16001,), ("bench/fdi-bench-v1",),
-            "the frozen benchmark suite fdi-bench-v1 (issue 27; its cases' seeds are SeedSequence([16001, g, s, r])): "
+    SeedSet("fdi-bench", "benchmark", (16001,), ("bench/fdi-bench-v1", "bench/fdi-bench-v2"),
+            "the frozen benchmark suites fdi-bench-v1 and v2 (issue 27; their cases' seeds are SeedSequence([16001, g, "
+            "s, r]); v2 holds v1's groups first, so v1's cases are v2's): "
             "reported on by every method, tuned on by none"),
     SeedSet("tail-coverage", "synthetic", (20261204,), ("docs/make_tail_coverage.py",),
             "synthetic AR(1) statistics of the tail method's coverage table"),

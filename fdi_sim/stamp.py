@@ -148,14 +148,14 @@ def replace_block(text: str, stamp: Stamp, body: str) -> str:
 
 
 def generated_files(root: Path = ROOT) -> list[Path]:
-    """Every file that may hold generated blocks: ``README.md``, ``docs/*.md`` and the stamped JSON
-    cards ``docs/card/*.json``."""
-    return ([root / "README.md"] + sorted((root / "docs").glob("*.md"))
+    """Every file that may hold generated blocks: ``README.md``, ``docs/*.md``, the HTML pages
+    ``docs/*.html`` (the leaderboard) and the stamped JSON cards ``docs/card/*.json``."""
+    return ([root / "README.md"] + sorted((root / "docs").glob("*.md")) + sorted((root / "docs").glob("*.html"))
             + sorted((root / "docs" / "card").glob("*.json")))
 
 
 def file_stamps(path: Path) -> list[Stamp]:
-    """The stamps of a Markdown file's generated blocks, or a JSON card's stamp."""
+    """The stamps of a Markdown (or HTML) file's generated blocks, or a JSON card's stamp."""
     path = Path(path)
     text = path.read_text()
     if path.suffix != ".json":

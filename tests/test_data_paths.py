@@ -29,5 +29,5 @@ def test_a_bench_case_names_its_suite_inside_the_package():
     case = suite.cases[0]
     st = suite_study(suite, bench_bank(True), [case])
     sc, _ = st.run_scenario(case.index)
-    assert sc.source == f"fdi_sim/_bench/fdi-bench-v1.toml case {case.case}"
+    assert sc.source == f"fdi_sim/_bench/{suite.name}.toml case {case.case}"
     assert str(PACKAGE) not in sc.source

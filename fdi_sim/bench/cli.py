@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 # one JSON fallback for numpy values in both commands
+from fdi_sim.bench.suite import LATEST
 from fdi_sim.study.cli import _jsonable
 from fdi_sim.units import S_PER_H
 
@@ -46,7 +47,7 @@ def add_parser(sub: Any) -> None:
                        "methods, the leaderboard (docs/bench.md)")
     bs = b.add_subparsers(dest="bench_command", required=True)
     r = bs.add_parser("run", help="fly (or reuse) the suite's cases with a bank and score every member and the bank")
-    r.add_argument("--suite", default="fdi-bench-v1", help="a shipped suite version or a suite file")
+    r.add_argument("--suite", default=LATEST, help="a shipped suite version or a suite file")
     r.add_argument("--bank", default=None, choices=("default",), help="the aircraft's default bank (default when no "
                    "--detector is given)")
     r.add_argument("--detector", action="append", default=[], metavar="ID[:key=value,...]", help="a registered or "
@@ -80,7 +81,7 @@ def add_parser(sub: Any) -> None:
     lb.add_argument("--out", default=None, help="write the Markdown table here (and an .html beside it)")
     lb.set_defaults(func=cmd_leaderboard)
     ls = bs.add_parser("list", help="the suite's groups, cases, splits and flight hours, and its hash")
-    ls.add_argument("--suite", default="fdi-bench-v1")
+    ls.add_argument("--suite", default=LATEST)
     ls.set_defaults(func=cmd_list)
     e = sub.add_parser("export", help="a benchmark results folder as a labelled dataset (Parquet per topic, a uniform "
                        "grid, events, per-flight labels, the split)")

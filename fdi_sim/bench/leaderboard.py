@@ -140,13 +140,22 @@ def leaderboard_markdown(rows: Sequence[Row]) -> str:
     return "\n".join(out)
 
 
-def leaderboard_html(rows: Sequence[Row]) -> str:
-    """The table as a self-contained HTML page."""
+def leaderboard_table_html(rows: Sequence[Row]) -> str:
+    """The table as an HTML ``<table>`` (the cells of :func:`leaderboard_markdown`)."""
     head = "".join(f"<th>{html.escape(h)}</th>" for h in HEADER)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in _cells(r)) + "</tr>" for r in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def html_page(body: str, title: str = "fdi-bench leaderboard") -> str:
+    """A self-contained HTML page around ``body`` (no script, no external file)."""
+    return ("<!doctype html>\n<html><head><meta charset='utf-8'><title>" + html.escape(title) + "</title><style>"
+            "body{font-family:sans-serif}table{border-collapse:collapse;margin-bottom:1em}"
+            "td,th{border:1px solid #ccc;padding:3px 6px;text-align:right}td:first-child{text-align:left}"
+            "</style></head><body>\n<h1>" + html.escape(title) + "</h1>\n" + body + "\n</body></html>\n")
+
+
+def leaderboard_html(rows: Sequence[Row]) -> str:
+    """The table as a self-contained HTML page."""
     suite = f"{rows[0].suite} ({rows[0].suite_hash[:12]}), split {rows[0].split}" if rows else ""
-    return ("<!doctype html><html><head><meta charset='utf-8'><title>fdi-bench leaderboard</title><style>"
-            "body{font-family:sans-serif}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
-            "text-align:right}td:first-child{text-align:left}</style></head><body>"
-            f"<h1>fdi-bench leaderboard</h1><p>{html.escape(suite)}</p><table><tr>{head}</tr>{body}</table>"
-            "</body></html>\n")
+    return html_page(f"<p>{html.escape(suite)}</p>{leaderboard_table_html(rows)}")

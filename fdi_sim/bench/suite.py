@@ -47,7 +47,11 @@ SUITES_DIR = Path(__file__).resolve().parents[1] / "_bench"
 #: every shipped suite version -> the hash of its cases (module docstring); a new version is a new entry
 FROZEN: dict[str, str] = {
     "fdi-bench-v1": "4ed7ec8d7db4a708723406538c1d3b76dfc06ce1edb3ba04eef77339b7ec52dc",
+    "fdi-bench-v2": "ca071da523c00d718292fd38d6e7254bb35739b36db8fe925d0205ad2aece6c2",
 }
+#: the suite a command uses when none is named: the newest shipped version (v2 holds every case of v1
+#: with the same id, split and scenario, and every fault type of the catalogue on each aircraft)
+LATEST = "fdi-bench-v2"
 SPLITS = ("train", "validation", "test")
 #: the split fractions (train, validation; test is the rest)
 SPLIT_FRACTIONS = (0.6, 0.2)
@@ -215,7 +219,7 @@ def resolve_suite(ref: str) -> Path:
                      f"did you mean {', '.join(near)}?" if near else f"shipped: {', '.join(suite_names())}")
 
 
-def load_suite(ref: str = "fdi-bench-v1", *, check_frozen: bool = True) -> Suite:
+def load_suite(ref: str = LATEST, *, check_frozen: bool = True) -> Suite:
     """Read a suite, build every case's scenario (each is validated) and check a shipped one's hash.
 
     Raises

@@ -20,7 +20,7 @@ from fdi_sim.bench.errors import BenchError
 from fdi_sim.bench.export import HASH_KEY, read_truths, scores_file_for
 from fdi_sim.bench.run import bench_bank, fly_bench, suite_study
 from fdi_sim.bench.score import BANK, case_outputs, score_folder
-from fdi_sim.bench.suite import FROZEN, SPLITS, load_suite, resolve_suite
+from fdi_sim.bench.suite import FROZEN, LATEST, SPLITS, load_suite, resolve_suite
 from fdi_sim.cli import main
 from fdi_sim.study.execute import TIMING_KEYS, load_records
 
@@ -33,7 +33,9 @@ def suite():
 
 
 def test_the_suite_hash_is_the_frozen_one_and_does_not_follow_the_hash_seed(suite):
-    assert suite.hash == FROZEN["fdi-bench-v1"]
+    assert suite.name == LATEST and suite.hash == FROZEN[LATEST]
+    for name in FROZEN:  # every shipped version still gives its frozen hash (load_suite checks it)
+        assert load_suite(name).hash == FROZEN[name]
     code = "from fdi_sim.bench.suite import load_suite; print(load_suite(check_frozen=False).hash)"
     for seed in ("0", "4242"):
         env = {**os.environ, "PYTHONHASHSEED": seed}
@@ -45,17 +47,52 @@ def test_a_changed_suite_is_refused_and_an_unknown_one_gets_a_did_you_mean(monke
     monkeypatch.setitem(suite_mod.FROZEN, "fdi-bench-v1", "0" * 64)
     with pytest.raises(BenchError, match="a suite version never changes"):
         load_suite("fdi-bench-v1")
-    with pytest.raises(BenchError, match="did you mean fdi-bench-v1"):
-        resolve_suite("fdi-bench-v2")
+    with pytest.raises(BenchError, match="did you mean fdi-bench-v"):
+        resolve_suite("fdi-bench-v9")
+
+
+def _unnamed(scenario_json: str) -> dict:
+    d = json.loads(scenario_json)
+    for k in ("name", "description"):  # the suite's name is in both
+        d.pop(k, None)
+    return d
+
+
+def test_v2_holds_every_case_of_v1_unchanged(suite):
+    """A result on v1 stands on v2: each v1 case is a v2 case with the same id, split and flight."""
+    v1 = load_suite("fdi-bench-v1")
+    by_id = {c.case: c for c in suite.cases}
+    assert len(suite.cases) > len(v1.cases)
+    for c in v1.cases:
+        c2 = by_id[c.case]
+        assert (c2.index, c2.split, c2.params) == (c.index, c.split, c.params), c.case
+        assert _unnamed(c2.scenario_json) == _unnamed(c.scenario_json), c.case
+
+
+#: fault types without a magnitude to grade (frozen at onset, released, fuel cut, no samples) or
+#: that end at the travel stop whatever their rate: one "size", 10 cases a group
+SIZELESS = {"actuator-stuck-v1", "actuator-float-v1", "actuator-hard-over-v1", "engine-flameout-v1",
+            "sensor-stuck-v1", "sensor-dropout-v1"}
 
 
 def test_the_suite_covers_what_the_issue_asks(suite):
+    from fdi_sim.faults.catalogue import FAULTS
+
     by_ac = Counter((c.aircraft, c.fault_type.split("-")[0] if c.fault_type else "none") for c in suite.cases)
     for ac in ("f16", "DHC6"):
         for kind in ("sensor", "actuator", "engine", "icing"):
             assert by_ac[(ac, kind)] >= 10, (ac, kind)
         ff_h = sum(c.duration_s for c in suite.cases if c.aircraft == ac and not c.fault_type and not c.negative) / 3600
         assert ff_h >= 50.0, (ac, ff_h)
+        # every fault type of the catalogue on this aircraft, on several targets where it has several,
+        # at three sizes or more unless it has no size
+        for ftype in FAULTS:
+            cs = [c for c in suite.cases if c.aircraft == ac and c.fault_type == ftype]
+            assert len(cs) >= 10, (ac, ftype)
+            if not ftype.startswith(("engine", "icing")) and ftype != "actuator-float-v1":
+                assert len({c.target for c in cs}) >= 2, (ac, ftype)
+            if ftype not in SIZELESS:
+                assert len({c.size for c in cs}) >= 3, (ac, ftype)
     phases = {c.phase for c in suite.cases}
     assert {"f16-cruise", "f16-climb", "f16-descent", "f16-turn", "dhc6-approach"} <= phases
     sized = [g for g in suite.model.groups if g.size is not None]
@@ -166,7 +203,7 @@ def test_the_export_is_parquet_read_by_pyarrow_with_labels_and_splits(flown, exp
     t = pq.read_table(exported / "topics" / "fdi.kalman-gust-v1.statistic.parquet")
     assert {"case", "t_s", "statistic", "alarm"} <= set(t.column_names)
     meta = json.loads((exported / "suite.json").read_text())
-    assert meta["suite_hash"] == FROZEN["fdi-bench-v1"]
+    assert meta["suite_hash"] == FROZEN[LATEST]
 
 
 def test_external_scores_of_the_banks_own_outputs_give_the_banks_numbers(flown, exported, tmp_path, capsys):
@@ -262,3 +299,28 @@ def test_the_air_and_ending_subsets_partition_each_aircraft(flown):
     levels = {json.loads(c.params)["atmosphere.turbulence"] for c in flown["cases"]}
     assert {k.rsplit(":", 1)[1] for k in s if k.startswith("air:f16:")} == levels
     assert "ended:f16:departed" not in s  # no case departed: an empty subset is left out
+
+
+def test_the_shipped_leaderboard_ranks_every_registered_detector_in_markdown_and_html():
+    """Issue 27's bar: the leaderboard in docs/ (Markdown in bench.md, HTML in leaderboard.html), with
+    its stamp, every built-in detector on it for each aircraft it can be designed on, and ALFA's
+    numbers beside them (whether the numbers are current is tests/test_generated_docs.py's check)."""
+    import html as html_mod
+
+    from fdi_sim import registry
+    from fdi_sim.stamp import read_blocks
+
+    md = {s.id: body for s, body in read_blocks((ROOT / "docs" / "bench.md").read_text())}["leaderboard"]
+    page = (ROOT / "docs" / "leaderboard.html").read_text()
+    blocks = {s.id: (s, body) for s, body in read_blocks(page)}
+    stamp, body = blocks["leaderboard-html"]
+    assert stamp.command.startswith("python docs/make_bench_tables.py")
+    text = html_mod.unescape(body)
+    assert LATEST in text and "Keipour" in text and "Keipour" in md
+    for det in registry.ids("detector"):
+        label = {"f16": "F-16", "DHC6": "DHC-6"}
+        for ac in ("f16", "DHC6"):
+            if (det, ac) == ("engine-gauges-v1", "f16"):  # two engines' gauges: the F-16 has one engine
+                continue
+            assert f"| {det} ({label[ac]}) |" in md, (det, ac)
+            assert f"<td>{det} ({label[ac]})</td>" in text, (det, ac)

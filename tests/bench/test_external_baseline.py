@@ -18,8 +18,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "fdi-sim-zscore"
 
-#: flown in a subprocess that sees the plugin: three cruise cases of the suite with zscore-v1 in the
-#: loop and full logs, exported; then the baseline computed from the export alone, as a user would
+#: flown in a subprocess that sees the plugin: the test split of one group of the suite (a case per
+#: size) with zscore-v1 in the loop and full logs, exported; then the baseline computed from the
+#: export alone, as a user would, and scored with ``bench score --split test``
 SCRIPT = r'''
 import json, sys
 from pathlib import Path
@@ -34,7 +35,8 @@ from fdi_sim.decision.persistence import k_of_n
 
 out = Path(sys.argv[1])
 suite = load_suite()
-cases = suite.select(groups=("f16-airspeed-drift",), per_group=1)  # 0.05, 0.2 and 1 kt/s from 40-90 s
+cases = suite.select(split="test", groups=("f16-airspeed-drift",))  # its test split: 0.05, 0.2, 1 kt/s from 40-90 s
+assert len(cases) == 3 and {c.split for c in cases} == {"test"}
 st = suite_study(suite, bench_bank(False, ["zscore-v1:signal=vc_kts"]), cases, full_logs=True)
 if __name__ == "__main__":
     o = fly_bench(st, out / "run", workers=1, progress=False)
@@ -114,7 +116,7 @@ def test_the_external_baseline_scores_like_the_same_plugin_flown(site, tmp_path)
     assert got["alarms"] > 0 and got["inloop"]["detection"]["detected"]["k"] >= 1, got  # not an empty comparison
     s = subprocess.run([sys.executable, "-c", "import sys; from fdi_sim.cli import main; sys.exit(main(sys.argv[1:]))",
                         "bench", "score", "--scores", str(tmp_path / "external.parquet"), "--export", got["export"],
-                        "--split", "all", "--json"], env=env, capture_output=True, text=True, timeout=600, cwd=ROOT,
+                        "--split", "test", "--json"], env=env, capture_output=True, text=True, timeout=600, cwd=ROOT,
                        check=False)
     assert s.returncode == 0, s.stderr
     ext = json.loads(s.stdout)["scores"]
