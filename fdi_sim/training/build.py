@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -204,7 +203,7 @@ def _pca_training(ctx: MemberContext) -> dict[str, np.ndarray]:
     of the set-up of an F-16 run with 3.3 s of flight). Given training logs (a card's) are used as
     they are, not cached."""
     from fdi_sim.detectors.samples import log_samples
-    from fdi_sim.training.cache import cache_dir, cache_lock
+    from fdi_sim.training.cache import cache_dir, cache_lock, read_arrays, write_arrays
 
     model = ctx.model()
 
@@ -218,18 +217,10 @@ def _pca_training(ctx: MemberContext) -> dict[str, np.ndarray]:
         return arrays()
     path = cache_dir() / f"pca-train-{_pca_training_key(ctx.sc, model)}.npz"
     with cache_lock(path):  # a study's other worker making the same entry: wait, then read it
-        try:
-            with np.load(path) as z:
-                return {"train_u": z["train_u"], "train_y": z["train_y"]}
-        except (OSError, ValueError, KeyError):  # absent or damaged: made again
-            pass
-        out = arrays()
-        try:  # committed by rename: a crash leaves no half-written entry; an unwritable cache costs the flights
-            tmp = path.with_name(f"{path.stem}.tmp{os.getpid()}.npz")
-            np.savez(tmp, **out)
-            os.replace(tmp, path)
-        except OSError:
-            pass
+        out = read_arrays(path, ("train_u", "train_y"))  # None when absent or damaged: made again
+        if out is None:
+            out = arrays()
+            write_arrays(path, out)
     return out
 
 
@@ -237,21 +228,14 @@ def _pca_training_key(sc: Scenario, model: Any) -> str:
     """What pca-v1's training data depends on: the fault-free training scenario (as the thresholds'
     key has it), the training seeds and length, the bank's rate, the sensor suite file, the model the
     samples are taken against (matrices, operating point, signal names) and the package version."""
-    from fdi_sim import __version__
-    from fdi_sim.sensors.suite import suite_path
-    from fdi_sim.training.flights import fault_free, training_seeds
+    from fdi_sim.training.cache import arrays_digest, scenario_parts
+    from fdi_sim.training.flights import training_seeds
 
     f = sc.model.fdi
-    ff = json.loads(fault_free(sc, 0, f.calibration_duration_s).to_json())
-    for k in ("name", "description"):
-        ff.pop(k, None)
-    h = hashlib.sha256()
-    for a in (model.A, model.B, model.C, model.D, model.u0, model.y0):
-        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-    parts = {"scenario": ff, "seeds": list(training_seeds(f.calibration_flights)), "T": f.calibration_duration_s,
-             "rate_hz": float(f.rate_hz), "suite": Path(suite_path(sc.aircraft, sc.model.sensors.suite)).read_text(),
-             "names": [list(model.input_names), list(model.output_names)], "model": h.hexdigest(),
-             "version": __version__}
+    parts = {**scenario_parts(sc, f.calibration_duration_s), "seeds": list(training_seeds(f.calibration_flights)),
+             "T": f.calibration_duration_s, "rate_hz": float(f.rate_hz),
+             "names": [list(model.input_names), list(model.output_names)],
+             "model": arrays_digest((model.A, model.B, model.C, model.D, model.u0, model.y0))}
     return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:24]
 
 

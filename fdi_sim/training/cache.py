@@ -1,5 +1,8 @@
 """The calibration cache on disk (``$FDI_SIM_CACHE/fdi-sim/calibrations``): entries keyed by
 everything a calibration depends on, written atomically, one process computing an entry at a time.
+An entry is JSON (:func:`read_entry`, :func:`write_entry`) or numpy arrays (:func:`read_arrays`,
+:func:`write_arrays`); the keys of every entry made from a scenario's training flights start from
+:func:`scenario_parts`.
 """
 from __future__ import annotations
 
@@ -7,10 +10,11 @@ import fcntl
 import hashlib
 import json
 import os
+import zipfile
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -25,21 +29,56 @@ def cache_dir() -> Path:
     return Path(base) / "fdi-sim" / "calibrations"
 
 
-def _calibration_parts(sc: Scenario, design: Any, params: Mapping[str, Any], rate_hz: float, n: int,
-                       duration_s: float, target: float) -> tuple[dict[str, Any], list[Any]]:
-    """What a calibration depends on: the inputs (JSON-able) and the design's arrays."""
+def scenario_parts(sc: Scenario, duration_s: float) -> dict[str, Any]:
+    """What every cache entry made from a scenario's fault-free training flights depends on.
+
+    One function for the calibrations' keys (:func:`calibration_key`) and pca-v1's training data's
+    (:func:`fdi_sim.training.build._pca_training_key`), so the two cannot drift apart. The keys
+    join these parts with their own under ``sort_keys``: the names and values here are part of every
+    key on disk, and a change to them misses every cache entry made before.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario whose fault-free training flights make the entry.
+    duration_s : float
+        The length of each training flight [s].
+
+    Returns
+    -------
+    dict
+        ``"scenario"``: the fault-free training scenario (:func:`fdi_sim.training.flights.fault_free`,
+        seed 0) as JSON without its name and description (they change no flight); ``"suite"``: the
+        text of the scenario's sensor suite file; ``"version"``: the package version.
+    """
     from fdi_sim.sensors.suite import suite_path
 
     ff = json.loads(fault_free(sc, 0, duration_s).to_json())
     ff.pop("name", None)
     ff.pop("description", None)
     suite = Path(suite_path(sc.aircraft, sc.model.sensors.suite)).read_text()
+    return {"scenario": ff, "suite": suite, "version": __version__}
+
+
+def arrays_digest(arrays: Iterable[Any]) -> str:
+    """sha256 (hex) of the arrays' float64 bytes in order (a model's or a design's matrices in a key)."""
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
+def _calibration_parts(sc: Scenario, design: Any, params: Mapping[str, Any], rate_hz: float, n: int,
+                       duration_s: float, target: float) -> tuple[dict[str, Any], list[Any]]:
+    """What a calibration depends on: the inputs (JSON-able) and the design's arrays."""
+    from fdi_sim.sensors.suite import suite_path
+
     default_suite = Path(suite_path(sc.aircraft, "default")).read_text()
     m = design.model
     arrays = [m.A, m.B, m.C, m.D, m.u0, m.y0, design.gains[-1], design.signatures]
-    parts = {"scenario": ff, "params": dict(params), "rate_hz": rate_hz, "n": n, "window_n": design.window_n,
-             "n_gains": len(design.gains), "duration_s": duration_s, "target": target, "suite": suite,
-             "default_suite": default_suite, "version": __version__}
+    parts = {**scenario_parts(sc, duration_s), "params": dict(params), "rate_hz": rate_hz, "n": n,
+             "window_n": design.window_n, "n_gains": len(design.gains), "duration_s": duration_s,
+             "target": target, "default_suite": default_suite}
     return parts, arrays
 
 
@@ -50,10 +89,7 @@ def calibration_key(sc: Scenario, design: Any, params: Mapping[str, Any], rate_h
     options, the rate, the number and length of the training flights, the target, the sensor
     suite file the design and the flights use, and the package version."""
     parts, arrays = _calibration_parts(sc, design, params, rate_hz, n, duration_s, target)
-    h = hashlib.sha256()
-    for a in arrays:
-        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-    blob = json.dumps({**parts, "design": h.hexdigest()}, sort_keys=True, default=str)
+    blob = json.dumps({**parts, "design": arrays_digest(arrays)}, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
@@ -112,6 +148,37 @@ def write_entry(path: Path, obj: Any, use: bool = True) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".tmp{os.getpid()}")
         tmp.write_text(json.dumps(obj))
+        os.replace(tmp, path)
+    except OSError:
+        pass
+
+
+def read_arrays(path: Path, names: Sequence[str], use: bool = True) -> dict[str, np.ndarray] | None:
+    """The numpy-array cache entry at ``path`` (``.npz``), as ``{name: array}`` for ``names``.
+
+    None without ``use``, when absent, or when damaged (not an ``.npz``, truncated, or without one of
+    ``names``): like a damaged JSON entry (:func:`read_entry`), it is recomputed, not a crash.
+    """
+    if not use or not path.is_file():
+        return None
+    try:
+        with np.load(path) as z:  # allow_pickle stays False: an entry holds plain arrays only
+            return {nm: np.asarray(z[nm]) for nm in names}
+    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile):
+        return None
+
+
+def write_arrays(path: Path, arrays: Mapping[str, Any], use: bool = True) -> None:
+    """Write the numpy-array cache entry ``arrays`` at ``path`` (``.npz``, uncompressed), committed by
+    rename like :func:`write_entry` (a crash leaves no half-written entry); an unwritable cache only
+    costs the next call the flights again."""
+    if not use:
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}")
+        with open(tmp, "wb") as fh:  # a file object: np.savez would add ".npz" to a name without it
+            np.savez(fh, **arrays)
         os.replace(tmp, path)
     except OSError:
         pass
