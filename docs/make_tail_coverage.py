@@ -39,10 +39,12 @@ from fdi_sim.decision.tail_truth import TRANSFORMS, Ar1Statistic, ar1_flights, e
 from fdi_sim.errors import DesignError  # noqa: E402
 from fdi_sim.seeds import seeds  # noqa: E402
 from fdi_sim.stamp import make_stamp, replace_block  # noqa: E402
+from fdi_sim.training.flights import DEFAULT_TRAINING_FLIGHTS, DEFAULT_TRAINING_S  # noqa: E402
 
 INPUTS = ("fdi_sim/decision/tail.py", "fdi_sim/decision/tail_truth.py", "fdi_sim/bank/members.py",
-          "fdi_sim/scenario/schema.py", "docs/make_tail_coverage.py")
-N_FLIGHTS, FLIGHT_S = 24, 300.0
+          "fdi_sim/scenario/schema.py", "fdi_sim/training/flights.py", "docs/make_tail_coverage.py")
+#: the synthetic training set has the shape of the real one (fdi_sim.training.flights' defaults)
+N_FLIGHTS, FLIGHT_S = DEFAULT_TRAINING_FLIGHTS, DEFAULT_TRAINING_S
 TRAINING_H = N_FLIGHTS * FLIGHT_S / 3600.0
 #: per aircraft: the default bank's per-member target [1/h], the default ``far_per_h`` split evenly
 MEMBER_TARGETS_PER_H = default_member_far_per_h()
