@@ -324,3 +324,25 @@ def test_the_shipped_leaderboard_ranks_every_registered_detector_in_markdown_and
                 continue
             assert f"| {det} ({label[ac]}) |" in md, (det, ac)
             assert f"<td>{det} ({label[ac]})</td>" in text, (det, ac)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "not met: a bench case's training flights (the member thresholds' design) are its own fault-free scenario, "
+    "whose maneuvers the suite cut at the case's end: a 150 s climb trains without the phase's doublets at 240 "
+    "and 270 s, a 600 s climb with them (parity-v1's F-16 climb threshold 16,512 against 2,646,639 on v2), so a "
+    "method's design depends on the length of the flight it is scored on; 88 % of parity-v1's F-16 false alarms "
+    "on v2 come from 15 of 627 flights, 9 of them such 150 s climbs"))
+def test_a_bench_cases_design_does_not_depend_on_its_length(suite):
+    """Two cases of one phase at one design point must train on the same flights: the benchmark scores
+    a method, not the length of the flight that it happened to be designed for."""
+    from fdi_sim.training.flights import DEFAULT_TRAINING_S, fault_free
+
+    bank = bench_bank(True)
+    long_ = next(c for c in suite.cases if c.group == "f16-fault-free" and c.phase == "f16-climb")
+    short = next(c for c in suite.cases if c.group == "f16-surface-loss" and c.phase == "f16-climb")
+    assert long_.duration_s > DEFAULT_TRAINING_S > short.duration_s
+    trains = []
+    for c in (long_, short):
+        sc, _ = suite_study(suite, bank, [c]).run_scenario(c.index)
+        trains.append(json.loads(fault_free(sc, 0, DEFAULT_TRAINING_S).to_json())["maneuvers"])
+    assert trains[0] == trains[1]
