@@ -1,8 +1,8 @@
 """Write docs/detectors.md: every registered detector on held-out fault-free flights and on every
 shipped fault scenario (protocol in fdi_sim/study/card.py).
 
-    python docs/make_detector_card.py                  # the card: 24 training + 8 held-out 300 s flights
-    python docs/make_detector_card.py --quick          # 6 + 8 flights of 120 s at a 1e-3 target, to try it
+    python docs/make_detector_card.py                  # the card: the bank's training flights and target
+    python docs/make_detector_card.py --quick          # fewer, shorter flights at a looser target, to try it
     python docs/make_detector_card.py --part faults    # only the fault scenarios (or --part conditions)
 Results go to docs/card/conditions.json (the fault-free conditions) and docs/card/faults.json (the
 fault scenarios), each with a "stamp" (fdi_sim.stamp) made when its flights start: the command (its
@@ -10,10 +10,10 @@ arguments but --workers, which changes no number), the code its numbers depend o
 digest. The markdown and figures are made from the JSON (--render, fdi_sim.review.detector_card):
 each table is a generated block carrying the stamp of the card its numbers come from.
 
-Run time (measured 2026-12-04, --workers 1, niced, on the 2-core machine with a study running, load
-4-5): the six conditions 27 min (2.5-5 min each), then about 7 min per fault scenario
-(f16_stuck_elevator 7 min), so about 100 min in all; that run was stopped after the first fault
-scenario (its conditions.json put back as committed; docs/detectors.md not rendered).
+The card trains like the bank (fdi_sim.training.flights: DEFAULT_TRAINING_FLIGHTS fault-free
+flights of DEFAULT_TRAINING_S at the per-sample target DEFAULT_TARGET; ``--quick``: QUICK). Its
+run time, cold (training flights) or warm (the calibration cache), is in the log that
+docs/regenerate.py writes beside its output.
 """
 from __future__ import annotations
 
@@ -26,7 +26,12 @@ from pathlib import Path
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
 sys.path.insert(0, str(ROOT))
+
+from fdi_sim.training.flights import DEFAULT_TARGET, DEFAULT_TRAINING_FLIGHTS, DEFAULT_TRAINING_S  # noqa: E402
+
 OUT = DOCS / "card"
+#: --quick: training flights, their length [s] and the per-sample target, to try the card (not shipped)
+QUICK = (6, 120.0, 1e-3)
 FAULT_SCENARIOS = ("f16_stuck_elevator", "f16_pitch_gyro_bias", "f16_aileron_float", "f16_engine_flameout",
                    "dhc6_airspeed_drift", "dhc6_intermittent_aoa", "dhc6_rudder_hardover", "dhc6_engine_flameout",
                    "dhc6_elevator_loss", "dhc6_tail_icing")
@@ -80,7 +85,7 @@ def main() -> int:
     p.add_argument("--render", action="store_true", help="only write the markdown and figures from docs/card/*.json")
     p.add_argument("--workers", type=int, default=2)
     a = p.parse_args()
-    n, dur, target = (6, 120.0, 1e-3) if a.quick else (24, 300.0, 1e-4)
+    n, dur, target = QUICK if a.quick else (DEFAULT_TRAINING_FLIGHTS, DEFAULT_TRAINING_S, DEFAULT_TARGET)
     OUT.mkdir(exist_ok=True)
     if not a.render:
         from dataclasses import asdict
