@@ -69,10 +69,26 @@ def test_v2_holds_every_case_of_v1_unchanged(suite):
         assert _unnamed(c2.scenario_json) == _unnamed(c.scenario_json), c.case
 
 
-#: fault types without a magnitude to grade (frozen at onset, released, fuel cut, no samples) or
-#: that end at the travel stop whatever their rate: one "size", 10 cases a group
-SIZELESS = {"actuator-stuck-v1", "actuator-float-v1", "actuator-hard-over-v1", "engine-flameout-v1",
-            "sensor-stuck-v1", "sensor-dropout-v1"}
+def _sizeless(params: type) -> bool:
+    """True when a fault's parameter model requires no magnitude: no required ``<prefix>_<unit>``
+    key (``MAGNITUDES``) and no required number of its own (``effectiveness``, ``loss``, ``scale``,
+    ``delay_s``, ``eta_final``...). Such a fault (frozen at onset, released, fuel cut, no samples, or
+    driven to a stop whatever its rate) has no size to grade: one "size", 10 cases a group."""
+    from fdi_sim.faults.params import FaultParams
+
+    own = set(params.model_fields) - set(FaultParams.model_fields) - {"t_start_s"}
+    return (not any(req for req, _ in params.MAGNITUDES.values())
+            and not any(params.model_fields[n].is_required() and params.model_fields[n].annotation is float
+                        for n in own))
+
+
+def test_the_sizeless_fault_types_are_the_ones_that_take_no_magnitude():
+    """The rule reads the catalogue; this names what it gives, so a new fault type is a decision."""
+    from fdi_sim.faults.catalogue import FAULTS
+
+    assert {t for t, (_, _, params, _) in FAULTS.items() if _sizeless(params)} == {
+        "actuator-stuck-v1", "actuator-float-v1", "actuator-hard-over-v1", "engine-flameout-v1",
+        "sensor-stuck-v1", "sensor-dropout-v1"}
 
 
 def test_the_suite_covers_what_the_issue_asks(suite):
@@ -86,12 +102,12 @@ def test_the_suite_covers_what_the_issue_asks(suite):
         assert ff_h >= 50.0, (ac, ff_h)
         # every fault type of the catalogue on this aircraft, on several targets where it has several,
         # at three sizes or more unless it has no size
-        for ftype in FAULTS:
+        for ftype, (_, _, params, _) in FAULTS.items():
             cs = [c for c in suite.cases if c.aircraft == ac and c.fault_type == ftype]
             assert len(cs) >= 10, (ac, ftype)
             if not ftype.startswith(("engine", "icing")) and ftype != "actuator-float-v1":
                 assert len({c.target for c in cs}) >= 2, (ac, ftype)
-            if ftype not in SIZELESS:
+            if not _sizeless(params):
                 assert len({c.size for c in cs}) >= 3, (ac, ftype)
     phases = {c.phase for c in suite.cases}
     assert {"f16-cruise", "f16-climb", "f16-descent", "f16-turn", "dhc6-approach"} <= phases
