@@ -440,3 +440,31 @@ def test_registered_observer_detectors_follow_the_contract() -> None:
     assert mm.hypotheses == ("nominal",) + tuple(m.input_names[c] for c in m.control_columns())
     with pytest.raises(DesignError, match="effectiveness"):
         registry.get("detector", "kalman-mmae-v1").factory(m, effectiveness=1.0)
+
+
+@pytest.mark.xfail(strict=True, reason="the default (normalized law, per-step 0.01) diverges at about 55 s on the "
+                   "F-16's 60-s light-turbulence flight (docs/observers.md, block adaptive-jsbsim): its estimates, "
+                   "not its error loop, go unstable; no fix yet (issue 23)")
+def test_default_adaptive_observer_survives_a_whole_minute_on_the_f16(tmp_path) -> None:
+    """The bar the 10-s test above cannot see: the factory's default stays finite for a whole 60-s F-16
+    flight (10 kft / 400 KTAS, light turbulence, seed 3, as docs/make_observer_table.py flies it)."""
+    from fdi_sim import registry
+    from fdi_sim.aircraft import Aircraft
+    from fdi_sim.flightlog import read_log
+    from fdi_sim.linear.linearize import linearize
+    from fdi_sim.operating_point import OperatingPoint
+    from fdi_sim.scenario import loads
+    from fdi_sim.training import fly
+
+    model = linearize(Aircraft("f16"), OperatingPoint("f16", 10000.0, vt_kts=400.0)).model
+    text = ('name = "ao_f16_60"\naircraft = "f16"\nduration_s = 60.0\nseed = 3\n[initial]\nh_ft = 10000.0\n'
+            'vt_kts = 400.0\n[atmosphere]\nturbulence = "light"\n')
+    log = read_log(fly(loads(text, "ao.toml"), tmp_path).log_path)
+    meas, cmd = log.topics["/sensors/measurements"], log.topics["/commands/pilot"]
+    y = np.stack([meas[o] for o in model.output_names], axis=1)
+    u = np.stack([cmd[c] if c in cmd.fields else np.full(len(cmd), model.u0[j])
+                  for j, c in enumerate(model.input_names)], axis=1)
+    default = registry.get("detector", "adaptive-observer-v1").factory(model)
+    for t, uk, yk in zip(meas.t_s[1:], u[:-1], y[1:]):
+        default.step(t, uk, yk)
+    assert default.diverged_t_s is None, f"diverged at {default.diverged_t_s - meas.t_s[1]:.2f} s"
