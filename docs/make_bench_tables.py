@@ -11,8 +11,8 @@ interrupted regeneration without flying a case twice.
 
 Banks and selections (:data:`BANKS`): the two default banks (one per aircraft, the ``default`` bank
 flies each case's own) and every registered detector side by side, each on the whole suite, with the
-selection in the table's caption. Both are ranked per aircraft: a default bank is one bank per aircraft, and a method's rate on one
-aircraft says nothing about the other.
+selection in the table's caption. Both are ranked per aircraft: a default bank is one bank per
+aircraft, and a method's rate on one aircraft says nothing about the other.
 """
 from __future__ import annotations
 
@@ -110,10 +110,11 @@ def _fly(out_root: Path, workers: int, banks: tuple[str, ...]) -> dict[str, dict
     return out
 
 
-def _leaderboard_parts(flown: dict[str, dict]) -> list[tuple[str, str, list]]:
-    """The leaderboard as ``(caption, heading, rows)`` per table: the default banks in one table (their
-    rows name the aircraft's bank); every detector in one table per aircraft, under a line saying which
-    (sixteen methods twice would bury the comparison). Markdown and HTML render the same parts."""
+def _leaderboard_parts(flown: dict[str, dict]) -> list[tuple[str, str, str, list]]:
+    """The leaderboard as ``(title, caption, heading, rows)`` per table (title and caption on a bank's
+    first table only): the default banks in one table (their rows name the aircraft's bank); every
+    detector in one table per aircraft, under a line saying which (sixteen methods twice would bury
+    the comparison). Markdown and HTML render the same parts."""
     from fdi_sim.bench.leaderboard import AIRCRAFT_LABELS, rank, result_rows
 
     parts = []
@@ -127,7 +128,8 @@ def _leaderboard_parts(flown: dict[str, dict]) -> list[tuple[str, str, list]]:
                        f"{r['scored'][sub]['bank']['exposure_h']:.1f} h of exposure outside the fault windows.",
                        rank(result_rows(r, sub))) for sub in subsets]
         nc, dep = r["not_scored"], r["departed"]
-        caption = (f"{'Default banks' if name == 'default' else 'Every registered detector'}|, {d['caption']}; "
+        title = "Default banks" if name == "default" else "Every registered detector"
+        caption = (f"{d['caption']}; "
                    f"design rate {d['design_far_per_h']:g} false alarms per flight hour per bank, split over its "
                    f"members ({d['members']}): "
                    f"{r['cases']} cases, {r['flight_h']:.1f} flight h scored; {len(dep)} departed (scored up to the "
@@ -135,7 +137,7 @@ def _leaderboard_parts(flown: dict[str, dict]) -> list[tuple[str, str, list]]:
                    + (f"; {len(nc)} not scored ({', '.join(sorted({x['status'] for x in nc}))}: "
                       f"{', '.join(x['case'] for x in nc[:4])}{'...' if len(nc) > 4 else ''})" if nc else "") + ".")
         for i, (heading, rows) in enumerate(tables):
-            parts.append((caption if i == 0 else "", heading, rows))
+            parts.append((title, caption, heading, rows) if i == 0 else ("", "", heading, rows))
     return parts
 
 
@@ -152,10 +154,9 @@ def _leaderboard(flown: dict[str, dict]) -> str:
     from fdi_sim.bench.leaderboard import leaderboard_markdown
 
     out = []
-    for caption, heading, rows in _leaderboard_parts(flown):
-        if caption:
-            bold, rest = caption.split("|", 1)
-            out += [f"**{bold}**{rest}", ""]
+    for title, caption, heading, rows in _leaderboard_parts(flown):
+        if title:
+            out += [f"**{title}**, {caption}", ""]
         out += ([heading, ""] if heading else []) + [leaderboard_markdown(rows), ""]
     return "\n".join(out + [_alfa_note()])
 
@@ -167,10 +168,9 @@ def _leaderboard_html(flown: dict[str, dict], suite: str) -> str:
     from fdi_sim.bench.leaderboard import leaderboard_table_html
 
     out = [f"<p>{html.escape(suite)}; the tables and how each metric is computed: docs/bench.md.</p>"]
-    for caption, heading, rows in _leaderboard_parts(flown):
-        if caption:
-            bold, rest = caption.split("|", 1)
-            out.append(f"<h2>{html.escape(bold)}</h2><p>{html.escape(rest.lstrip(', '))}</p>")
+    for title, caption, heading, rows in _leaderboard_parts(flown):
+        if title:
+            out.append(f"<h2>{html.escape(title)}</h2><p>{html.escape(caption)}</p>")
         if heading:
             out.append(f"<h3>{html.escape(heading)}</h3>")
         out.append(leaderboard_table_html(rows))
@@ -277,11 +277,11 @@ def main(argv: list[str] | None = None) -> int:
         text = replace_block(text, make_stamp("leaderboard", command, CODE), _leaderboard(flown))
         if set(flown) == {b for b, _, _ in BANKS}:  # the page holds every bank's tables, or is not rewritten
             from fdi_sim.bench.leaderboard import html_page
-            from fdi_sim.bench.suite import load_suite
+            from fdi_sim.bench.suite import FROZEN, LATEST
 
-            su = load_suite()
+            su = (LATEST, FROZEN[LATEST])  # what _fly flew (load_suite() checked the hash)
             HTML.write_text(html_page(generated_block(make_stamp("leaderboard-html", command, CODE),
-                                                      _leaderboard_html(flown, f"{su.name}, hash {su.hash[:16]}..."))))
+                                                      _leaderboard_html(flown, f"{su[0]}, hash {su[1][:16]}..."))))
             print(f"wrote {HTML}")
         if "default" in flown:
             text = replace_block(text, make_stamp("bench-by-group", command, CODE), _by_group(flown))

@@ -138,10 +138,32 @@ class SuiteStudy(Study):
         data = json.loads(case.scenario_json)
         assert self.bank is not None
         data["fdi"] = {**self.bank.fdi, "log_residuals": False}
+        # the design trains on the phase's whole maneuver list, not the case's (cut at its end): a case
+        # shorter than the training flights would otherwise be designed apart from its phase's longer cases
+        data["fdi"]["design"] = {**dict(self.bank.fdi.get("design", {})),
+                                 "maneuvers": phase_maneuvers(self._suite, case.group, case.phase)}
         data["detectors"] = [dict(d) for d in self.bank.detectors]
         data["log"] = {"per_step": bool(self.model.output.full_logs)}  # the 120 Hz topics too (export)
         sc = from_dict(data, source=f"{shown_path(self._suite.source)} case {case.case}")  # no checkout path in a log
         return sc, {"case": case.case, **json.loads(case.params)}
+
+
+def phase_maneuvers(suite: Suite, group: str, phase: str) -> list[dict[str, Any]]:
+    """The maneuvers of ``group``'s cases in ``phase`` before the suite cut them at a case's end: the
+    phase's base scenario's, then the group's (the order of :func:`fdi_sim.bench.suite._case`)."""
+    key = (suite.source, suite.hash, group, phase)
+    if key not in _PHASE_MANEUVERS:
+        from fdi_sim.scenario import load
+        from fdi_sim.study.spec import resolve_scenario
+
+        base = json.loads(load(resolve_scenario(suite.model.phases[phase].scenario, Path(suite.source).parent)).to_json())
+        g = next(x for x in suite.model.groups if x.name == group)
+        _PHASE_MANEUVERS[key] = list(base.get("maneuvers", [])) + [dict(m) for m in g.maneuvers]
+    return [dict(m) for m in _PHASE_MANEUVERS[key]]
+
+
+#: (suite, hash, group, phase) -> maneuvers (a study worker builds many cases of few phases)
+_PHASE_MANEUVERS: dict[tuple[str, str, str, str], list[dict[str, Any]]] = {}
 
 
 def suite_study(suite: Suite, bank: BenchBank, cases: Sequence[Case], *, full_logs: bool = False) -> SuiteStudy:

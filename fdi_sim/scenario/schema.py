@@ -91,6 +91,20 @@ class FdiDesignSection(_Section):
                                         description="its direction (from) [deg] (default: the flight's; 0 without wind)")
     noise_scale: float | None = Field(default=None, ge=0.0, le=100.0,
                                       description="sensor noise scale of the training flights (default: the flight's)")
+    # TOML arrays give lists: not strict; each entry is validated by its plugin when the design is built
+    maneuvers: tuple[dict[str, Any], ...] | None = Field(
+        default=None, strict=False, description="the training flights' maneuvers (default: the flight's). A "
+        "benchmark case sets its phase's whole list: a case shorter than the training flights has lost the "
+        "maneuvers that start after its end, and its design would differ from a longer case's of the same phase")
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        # maneuvers is left out while unset: a scenario's JSON (in every log, in every cache key) is the
+        # same bytes as before the key existed
+        d = handler(self)
+        if self.maneuvers is None and isinstance(d, dict):
+            d.pop("maneuvers", None)
+        return d
 
 
 class FdiSection(_Section):

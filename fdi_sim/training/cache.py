@@ -14,7 +14,7 @@ import zipfile
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Mapping, Sequence
+from typing import Any, BinaryIO, Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -53,11 +53,19 @@ def scenario_parts(sc: Scenario, duration_s: float) -> dict[str, Any]:
     """
     from fdi_sim.sensors.suite import suite_path
 
-    ff = json.loads(fault_free(sc, 0, duration_s).to_json())
-    ff.pop("name", None)
-    ff.pop("description", None)
     suite = Path(suite_path(sc.aircraft, sc.model.sensors.suite)).read_text()
-    return {"scenario": ff, "suite": suite, "version": __version__}
+    return {"scenario": training_scenario_json(sc, duration_s), "suite": suite, "version": __version__}
+
+
+def training_scenario_json(sc: Scenario, duration_s: float, drop: Sequence[str] = ("name", "description")) -> dict[str, Any]:
+    """The fault-free training scenario (:func:`fdi_sim.training.flights.fault_free`, seed 0, flights of
+    ``duration_s`` [s]) as JSON without the keys ``drop`` (its name and description change no flight;
+    the thresholds' keys also drop ``fdi``, which their own parts hold): the scenario part of every key
+    made from a scenario's training flights."""
+    ff = json.loads(fault_free(sc, 0, duration_s).to_json())
+    for k in drop:
+        ff.pop(k, None)
+    return ff
 
 
 def arrays_digest(arrays: Iterable[Any]) -> str:
@@ -139,18 +147,25 @@ def read_entry(path: Path, use: bool = True) -> Any:
         return None
 
 
-def write_entry(path: Path, obj: Any, use: bool = True) -> None:
-    """Write the JSON cache entry ``obj`` at ``path``, committed by rename (a crash leaves no
-    half-written entry); an unwritable cache only costs the next call the flights again."""
+def _commit(path: Path, write: Callable[[BinaryIO], None], use: bool) -> None:
+    """Write a cache entry at ``path`` through ``write`` into a temporary file, then rename it there
+    (a crash leaves no half-written entry); an unwritable cache only costs the next call the flights
+    again."""
     if not use:
         return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(json.dumps(obj))
+        with open(tmp, "wb") as fh:  # a file object: np.savez would add ".npz" to a name without it
+            write(fh)
         os.replace(tmp, path)
     except OSError:
         pass
+
+
+def write_entry(path: Path, obj: Any, use: bool = True) -> None:
+    """Write the JSON cache entry ``obj`` at ``path`` (:func:`_commit`)."""
+    _commit(path, lambda fh: fh.write(json.dumps(obj).encode()), use)
 
 
 def read_arrays(path: Path, names: Sequence[str], use: bool = True) -> dict[str, np.ndarray] | None:
@@ -169,19 +184,8 @@ def read_arrays(path: Path, names: Sequence[str], use: bool = True) -> dict[str,
 
 
 def write_arrays(path: Path, arrays: Mapping[str, Any], use: bool = True) -> None:
-    """Write the numpy-array cache entry ``arrays`` at ``path`` (``.npz``, uncompressed), committed by
-    rename like :func:`write_entry` (a crash leaves no half-written entry); an unwritable cache only
-    costs the next call the flights again."""
-    if not use:
-        return
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        with open(tmp, "wb") as fh:  # a file object: np.savez would add ".npz" to a name without it
-            np.savez(fh, **arrays)
-        os.replace(tmp, path)
-    except OSError:
-        pass
+    """Write the numpy-array cache entry ``arrays`` at ``path`` (``.npz``, uncompressed; :func:`_commit`)."""
+    _commit(path, lambda fh: np.savez(fh, **arrays), use)
 
 
 @contextmanager

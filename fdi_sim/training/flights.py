@@ -20,6 +20,7 @@ from fdi_sim.seeds import seeds as _seeds
 from fdi_sim.errors import DesignError
 from fdi_sim.scenario import Scenario
 from fdi_sim.scenario.loader import from_dict
+from fdi_sim.scenario.schema import FdiSection
 
 
 #: training seeds are TRAINING_SEED_BASE + i (the seed registry's "training" set: far from the
@@ -27,10 +28,10 @@ from fdi_sim.scenario.loader import from_dict
 TRAINING_SEED_BASE = _seeds("training")[0]
 
 
-DEFAULT_TRAINING_FLIGHTS = 24
-
-
-DEFAULT_TRAINING_S = 300.0
+#: how many fault-free training flights a calibration flies, and their length [s]: the defaults of the
+#: scenario's ``[fdi] calibration_flights`` and ``calibration_duration_s`` (one number each, there)
+DEFAULT_TRAINING_FLIGHTS: int = FdiSection.model_fields["calibration_flights"].default
+DEFAULT_TRAINING_S: float = FdiSection.model_fields["calibration_duration_s"].default
 
 
 #: per-sample false-alarm target at the detector rate; 1e-3 put alarms on the autopilot's doublets

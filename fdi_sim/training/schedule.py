@@ -449,7 +449,7 @@ def design_choice(sc: Scenario) -> tuple[Scenario, str]:
     """
     d = sc.model.fdi.design
     if d.point == "auto":
-        if all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale)):
+        if all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale, d.maneuvers)):
             des, note = atlas_design(sc)
             if des is not None:
                 return des, note
@@ -547,10 +547,19 @@ def _design_scenario(sc: Scenario) -> Scenario:
     bank), and each node is designed and calibrated once (cached).
     """
     d = sc.model.fdi.design
-    if d.point != "grid" and all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale)):
+    if d.point != "grid" and all(v is None for v in (d.turbulence, d.wind_speed_kts, d.wind_from_deg, d.noise_scale,
+                                                     d.maneuvers)):
         return sc
     data = json.loads(sc.to_json())
     what = []
+    if d.maneuvers is not None:
+        # the training flights fly these (cut at their own length by training.flights.fault_free); the
+        # design scenario is long enough to hold them (its duration is no part of the design: fault_free
+        # sets the training flights' own)
+        man = [dict(m) for m in d.maneuvers]
+        last = max((float(m.get("t_start_s", 0.0)) for m in man), default=0.0)
+        data["duration_s"] = max(float(data["duration_s"]), float(sc.model.fdi.calibration_duration_s), last + 1.0)
+        data["maneuvers"] = man
     if d.point == "grid":
         dh, dv = default_spacing(sc.aircraft)
         h = max(dh, round(sc.model.initial.h_ft / dh) * dh)

@@ -182,13 +182,10 @@ def _cache_path(key: str) -> Path:
 def _thresholds_key(sc: Scenario, bank: Any, p: float) -> str:
     from fdi_sim.decision.tail import TAIL_METHOD
     from fdi_sim.detectors.stream import stream_design_key
-    from fdi_sim.training.flights import fault_free
+    from fdi_sim.training.cache import training_scenario_json
 
     f = sc.model.fdi
-    ff = json.loads(fault_free(sc, 0, f.calibration_duration_s).to_json())
-    ff.pop("name", None)
-    ff.pop("description", None)
-    ff.pop("fdi", None)
+    ff = training_scenario_json(sc, f.calibration_duration_s, drop=("name", "description", "fdi"))
     h = hashlib.sha256()
     for mem in bank.members:
         h.update(mem.id.encode())
@@ -213,12 +210,10 @@ def _thresholds_atlas_key(sc: Scenario, bank: Any, p: float) -> tuple[str, list[
     from fdi_sim.decision.tail import TAIL_METHOD
     from fdi_sim.detectors.stream import stream_design_key
     from fdi_sim.training.atlas import fingerprint, inputs_key
-    from fdi_sim.training.flights import fault_free
+    from fdi_sim.training.cache import training_scenario_json
 
     f = sc.model.fdi
-    ff = json.loads(fault_free(sc, 0, f.calibration_duration_s).to_json())
-    for k in ("name", "description", "fdi"):
-        ff.pop(k, None)
+    ff = training_scenario_json(sc, f.calibration_duration_s, drop=("name", "description", "fdi"))
     members, fp = [], []
     for mem in bank.members:
         arrays = getattr(mem.stream, "design_arrays", None)

@@ -342,12 +342,6 @@ def test_the_shipped_leaderboard_ranks_every_registered_detector_in_markdown_and
             assert f"<td>{det} ({label[ac]})</td>" in text, (det, ac)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "not met: a bench case's training flights (the member thresholds' design) are its own fault-free scenario, "
-    "whose maneuvers the suite cut at the case's end: a 150 s climb trains without the phase's doublets at 240 "
-    "and 270 s, a 600 s climb with them (parity-v1's F-16 climb threshold 16,512 against 2,646,639 on v2), so a "
-    "method's design depends on the length of the flight it is scored on; 88 % of parity-v1's F-16 false alarms "
-    "on v2 come from 15 of 627 flights, 9 of them such 150 s climbs"))
 def test_a_bench_cases_design_does_not_depend_on_its_length(suite):
     """Two cases of one phase at one design point must train on the same flights: the benchmark scores
     a method, not the length of the flight that it happened to be designed for."""
@@ -357,8 +351,16 @@ def test_a_bench_cases_design_does_not_depend_on_its_length(suite):
     long_ = next(c for c in suite.cases if c.group == "f16-fault-free" and c.phase == "f16-climb")
     short = next(c for c in suite.cases if c.group == "f16-surface-loss" and c.phase == "f16-climb")
     assert long_.duration_s > DEFAULT_TRAINING_S > short.duration_s
-    trains = []
+    from fdi_sim.training.cache import scenario_parts
+    from fdi_sim.training.schedule import design_scenario
+
+    trains, keys = [], []
     for c in (long_, short):
         sc, _ = suite_study(suite, bank, [c]).run_scenario(c.index)
-        trains.append(json.loads(fault_free(sc, 0, DEFAULT_TRAINING_S).to_json())["maneuvers"])
+        assert float(sc.model.duration_s) == c.duration_s  # the flight itself is the case's
+        d = design_scenario(sc)
+        trains.append(json.loads(fault_free(d, 0, DEFAULT_TRAINING_S).to_json())["maneuvers"])
+        keys.append(json.dumps(scenario_parts(d, DEFAULT_TRAINING_S), sort_keys=True, default=str))
+    assert len(trains[0]) > len([m for m in json.loads(short.scenario_json)["maneuvers"]])  # what the cut lost
     assert trains[0] == trains[1]
+    assert keys[0] == keys[1]  # one design, one cache entry (the short case reuses the long one's)
