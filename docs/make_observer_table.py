@@ -1,5 +1,6 @@
-"""What Sidar's adaptive observer estimates on the iced interim Twin Otter, as the generated block
-``adapted-entries`` of docs/observers.md.
+"""What Sidar's adaptive observer estimates on the iced interim Twin Otter, and how it fares on
+JSBSim flights, as the generated blocks ``adapted-entries`` and ``adaptive-jsbsim`` of
+docs/observers.md.
 
 The adaptive run of the NIS false-alarm study (``fig_far`` of docs/make_observer_figures.py, the
 same set-up: the interim longitudinal Twin Otter at 120 Hz, ZOH, the steady-state Kalman design
@@ -9,13 +10,24 @@ gains 3e-4, 0.3, 0.3, 0.3 on the entries A[vt,vt], A[alpha..q, alpha..q] and B[q
 per adapted entry the relative change ``estimates().relative_change`` at every step of the second
 300 s, its mean and range, against the true relative change of the continuous derivative
 (eta k of the UIUC factors) and of the discrete entry the observer adapts (A - I on the
-diagonal, as ``AdaptiveObserver`` compares). No JSBSim (the interim model). Runs in about 10 s.
+diagonal, as ``AdaptiveObserver`` compares). No JSBSim (the interim model); about 10 s.
+
+``adaptive-jsbsim``: as ``tests/detectors/test_adaptive_observer.py`` (its ``jsbsim_flights``), but
+60 s long and in light and moderate turbulence: fault-free JSBSim flights (seed 3; F-16 10 kft /
+400 KTAS, DHC-6 5000 ft / 120 KCAS; autopilot, default sensor suite, no detector bank), each
+with the model linearized at its point, read back from the MCAP log as (u(k-1), y(k)) pairs,
+and run through ``adaptive-observer-v1``'s factory at Sidar's unnormalized law (per-step
+m = n = 0.1, 0.01, 0.001) and at the normalized law (0.01, the default, and 0.1): when the
+state stops being finite (``diverged_t_s`` after the first sample), the median |x̂|² and the rms
+of the largest x̂ components on the default (normalized 0.01) run, and the smallest nominal
+entry the relative-change scores divide by. About a minute per flight.
 
     python docs/make_observer_table.py
 """
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +46,23 @@ INPUTS = ("fdi_sim/detectors/adaptive_observer.py", "fdi_sim/detectors/kalman.py
           "fdi_sim/detectors/directional_observer.py", "fdi_sim/papers/twin_otter_interim.py", "fdi_sim/linear/model.py",
           "fdi_sim/linear/transform.py", "fdi_sim/decision/chi2.py", "fdi_sim/errors.py", "fdi_sim/units.py",
           "docs/make_observer_table.py")
+#: the flights (the sim loop without a detector bank, the log) and the observer's factory
+JSBSIM_INPUTS = ("aircraft", "fdi_sim/_aircraft", "fdi_sim/aircraft", "fdi_sim/sim", "fdi_sim/pilot", "fdi_sim/sensors",
+                 "fdi_sim/scenario", "fdi_sim/flightlog", "fdi_sim/faults/injector.py", "fdi_sim/signals.py",
+                 "fdi_sim/linear", "fdi_sim/operating_point.py", "fdi_sim/isa.py", "fdi_sim/seeds.py",
+                 "fdi_sim/units.py", "fdi_sim/errors.py", "fdi_sim/detectors/adaptive_observer.py",
+                 "fdi_sim/detectors/catalogue_observers.py", "fdi_sim/detectors/kalman.py",
+                 "fdi_sim/detectors/noise.py", "fdi_sim/detectors/directional_observer.py",
+                 "fdi_sim/detectors/base.py", "fdi_sim/decision/chi2.py", "fdi_sim/decision/base.py",
+                 "docs/make_observer_table.py")
+#: (label, aircraft, [initial] of the scenario, operating point arguments)
+JSBSIM_POINTS = (("F-16 10 kft / 400 KTAS", "f16", "h_ft = 10000.0\nvt_kts = 400.0", dict(h_ft=10000.0, vt_kts=400.0)),
+                 ("DHC-6 5000 ft / 120 KCAS", "DHC6", "h_ft = 5000.0\nvc_kts = 120.0", dict(h_ft=5000.0, vc_kts=120.0)))
+TURBULENCE = ("light", "moderate")
+FLIGHT_S, FLIGHT_SEED = 60.0, 3
+#: (column label, per-step gain m = n, normalized law)
+LAWS = (("Sidar, m = 0.1", 0.1, False), ("Sidar, m = 0.01", 0.01, False), ("Sidar, m = 0.001", 0.001, False),
+        ("normalized, m = 0.01 (default)", 0.01, True), ("normalized, m = 0.1", 0.1, True))
 DT = 1 / 120
 QD = np.diag([0.02, 2e-4, 1e-3, 1e-5]) ** 2
 RD = np.diag([0.1, 0.002, 0.002, 0.002]) ** 2
@@ -84,5 +113,71 @@ def render() -> str:
     return "\n".join(lines)
 
 
+def _flight(aircraft: str, init: str, op_kw: dict, turbulence: str, tmp: Path):
+    """One fault-free flight and its model: (model, t [s], u(k-1), y(k)) as the test reads them."""
+    from fdi_sim.aircraft import Aircraft
+    from fdi_sim.flightlog import read_log
+    from fdi_sim.linear.linearize import linearize
+    from fdi_sim.operating_point import OperatingPoint
+    from fdi_sim.scenario import loads
+    from fdi_sim.sim.run import run
+
+    model = linearize(Aircraft(aircraft), OperatingPoint(aircraft, **op_kw)).model
+    text = (f'name = "ao_{aircraft}_{turbulence}"\naircraft = "{aircraft}"\nduration_s = {FLIGHT_S}\n'
+            f'seed = {FLIGHT_SEED}\n[initial]\n{init}\n[atmosphere]\nturbulence = "{turbulence}"\n')
+    log = read_log(run(loads(text, "ao.toml"), tmp).log_path)
+    meas, cmd = log.topics["/sensors/measurements"], log.topics["/commands/pilot"]
+    y = np.stack([meas[o] for o in model.output_names], axis=1)
+    u = np.stack([cmd[c] if c in cmd.fields else np.full(len(cmd), model.u0[j])  # gust columns: trim (0)
+                  for j, c in enumerate(model.input_names)], axis=1)
+    return model, meas.t_s[1:], u[:-1], y[1:]
+
+
+def _fly_observer(obs, t_s, u, y) -> tuple[str, list[np.ndarray]]:
+    """Run ``obs`` over the flight; its divergence time after the first sample ("60 s" when it
+    stays finite) and its state estimate at every step while finite."""
+    xs = []
+    for t, uk, yk in zip(t_s, u, y):
+        obs.step(t, uk, yk)
+        if obs.diverged_t_s is not None:
+            return f"{obs.diverged_t_s - t_s[0]:.3f} s", xs
+        xs.append(np.array(obs.x_hat, float))
+    return f"finite for {t_s[-1] - t_s[0]:.0f} s", xs
+
+
+def jsbsim_table() -> str:
+    from fdi_sim.detectors.catalogue_observers import make_adaptive_observer
+
+    head = "| flight | " + " | ".join(lab for lab, _, _ in LAWS) + " | median \\|x̂\\|² | largest rms of x̂ |"
+    lines = [head, "|---" * (len(LAWS) + 3) + "|"]
+    smallest = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, aircraft, init, op_kw in JSBSIM_POINTS:
+            for turb in TURBULENCE:
+                model, t_s, u, y = _flight(aircraft, init, op_kw, turb, Path(tmp) / f"{aircraft}_{turb}")
+                cells, x_default = [], None
+                for _, m, normalized in LAWS:
+                    obs = make_adaptive_observer(model, m_gain=m, n_gain=m, normalized=normalized)
+                    when, xs = _fly_observer(obs, t_s, u, y)
+                    cells.append(when)
+                    if normalized and m == 0.01:
+                        x_default, names = np.array(xs), obs.model.state_names
+                        nominal = np.abs(obs._nominal[obs._nominal != 0])  # what the scores divide by
+                        smallest.append(f"{label.split(' ')[0]} {nominal.min():.0e}")
+                x2 = np.einsum("ij,ij->i", x_default, x_default)
+                rms = np.sqrt(np.mean(x_default ** 2, axis=0))
+                top = np.argsort(rms)[::-1][:3]
+                lines.append(f"| {label}, {turb} | " + " | ".join(cells) + f" | {np.median(x2):.2g} | "
+                             + ", ".join(f"{names[i]} {rms[i]:.3g}" for i in top) + " |")
+    lines += ["", f"Fault-free {FLIGHT_S:g} s flights, seed {FLIGHT_SEED}, autopilot, default sensor suite; Sidar: the "
+              "unnormalized law (eq. 23), normalized: each update divided by 1 + \\|x̂\\|² + \\|u\\|²; a time is when "
+              "the state estimate stopped being finite, after the first sample. \\|x̂\\|² and rms: the state "
+              "estimate's deviation from trim on the normalized 0.01 run, in the model's units (ft, ft/s, rad, rpm). "
+              f"Smallest nominal adapted entry (the scores' denominator): {', '.join(dict.fromkeys(smallest))}."]
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":
-    raise SystemExit(table_main(MD, "python docs/make_observer_table.py", [(BLOCK, INPUTS, render)], sys.argv[1:]))
+    raise SystemExit(table_main(MD, "python docs/make_observer_table.py", [(BLOCK, INPUTS, render),
+                                                                                   ("adaptive-jsbsim", JSBSIM_INPUTS,
+                                                                                    jsbsim_table)], sys.argv[1:]))
