@@ -133,6 +133,11 @@ def _flight(aircraft: str, init: str, op_kw: dict, turbulence: str, tmp: Path):
     return model, meas.t_s[1:], u[:-1], y[1:]
 
 
+def _fmt(v: float) -> str:
+    """A positive number with 2 significant digits, whole above 10 (63, 7400)."""
+    return f"{v:.0f}" if v >= 10 else f"{v:.2g}"
+
+
 def _fly_observer(obs, t_s, u, y) -> tuple[str, list[np.ndarray]]:
     """Run ``obs`` over the flight; its divergence time after the first sample ("60 s" when it
     stays finite) and its state estimate at every step while finite."""
@@ -169,7 +174,7 @@ def jsbsim_table() -> str:
                 x2 = np.einsum("ij,ij->i", x, x)
                 rms = np.sqrt(np.mean(x ** 2, axis=0))
                 top = np.argsort(rms)[::-1][:3]
-                lines.append(f"| {label}, {turb} | " + " | ".join(cells) + f" | {np.median(x2):.2g} | "
+                lines.append(f"| {label}, {turb} | " + " | ".join(cells) + f" | {_fmt(float(np.median(x2)))} | "
                              + ", ".join(f"{names[i]} {rms[i]:.3g}" for i in top) + " |")
     lines += ["", f"Fault-free {FLIGHT_S:g} s flights, seed {FLIGHT_SEED}, autopilot, default sensor suite; Sidar: the "
               "unnormalized law (eq. 23), normalized: each update divided by 1 + \\|x̂\\|² + \\|u\\|²; a time is when "
