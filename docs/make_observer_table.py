@@ -134,7 +134,7 @@ def _flight(aircraft: str, init: str, op_kw: dict, turbulence: str, tmp: Path):
 
 
 def _fmt(v: float) -> str:
-    """A positive number with 2 significant digits, whole above 10 (63, 7400)."""
+    """A positive number: whole from 10 up (63, 7420), 2 significant digits below."""
     return f"{v:.0f}" if v >= 10 else f"{v:.2g}"
 
 
