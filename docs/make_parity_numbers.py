@@ -13,9 +13,14 @@ around the F-16 tables quotes are made here, in a script of their own, from thei
   residual space and the model-based [W; -H'W], the same training from 3 s runs (smallest
   model-space eigenvalue, alarm rate of fault 4), and the PCA study at full size;
 * ``parity-robust-curve``: J*(p) of Lou's robustness curves (the synthetic clean + iced set,
-  s = 2, the three sensor sets of ``figures/parity_robustness_curve.png``; no randomness).
+  s = 2, the three sensor sets of ``figures/parity_robustness_curve.png``; no randomness);
+* ``parity-dhc6-trims``: the DHC-6 study's models (``linearize_models(StudyConfig())``: JSBSim
+  trims and linearizes, no flight): per eta the pitch trim, elevator angle and throttle, and the
+  trim shift of every output at the largest eta; the full clean model's beta trim and its
+  d nx / d beta.
 
-Pure numpy on the paper's matrices, no JSBSim; runs in well under a minute.
+The F-16 and synthetic parts are numpy on the paper's matrices; the DHC-6 part trims JSBSim.
+Runs in well under a minute.
 
     python docs/make_parity_numbers.py [--print]
 """
@@ -50,6 +55,7 @@ from fdi_sim.papers.hagenblad_f16 import (  # noqa: E402
     f16_reading,
     simulate_f16,
 )
+from fdi_sim.papers.dhc6_icing_flights import StudyConfig, linearize_models  # noqa: E402
 from fdi_sim.stamp import table_main  # noqa: E402
 
 MD = ROOT / "docs" / "parity.md"
@@ -64,6 +70,10 @@ ROBUST_INPUTS = ("fdi_sim/detectors/robust_parity.py", "fdi_sim/detectors/parity
                  "fdi_sim/detectors/window_detector.py", "fdi_sim/detectors/base.py", "fdi_sim/decision/chi2.py",
                  "fdi_sim/decision/base.py", "fdi_sim/linear/model.py", "fdi_sim/errors.py",
                  "docs/make_parity_numbers.py")
+#: the DHC-6 models: the study's module, JSBSim trims and the linearizer on the icing overlay
+DHC6_INPUTS = ("fdi_sim/papers/dhc6_icing_flights.py", "aircraft/DHC6", "fdi_sim/aircraft", "fdi_sim/linear",
+               "fdi_sim/operating_point.py", "fdi_sim/isa.py", "fdi_sim/units.py", "fdi_sim/errors.py",
+               "docs/make_parity_numbers.py")
 #: seeds of this script's own draws (independent of docs/make_parity_figures.py's stream)
 SEED_PARITY, SEED_PCA = 2028, 2029
 #: windows per case of the full-size studies, and training windows of the PCA
@@ -231,8 +241,34 @@ def robust_curve_block() -> str:
     return "\n".join(lines)
 
 
+def dhc6_trims_block() -> str:
+    """Trims of the DHC-6 study's models per eta, and the trim shift the ``robust+trim`` set nulls."""
+    cfg = StudyConfig()
+    ms = linearize_models(cfg)
+    clean = ms.lon[0]
+    lines = ["| eta | pitch trim [-] | elevator [rad] | throttle [-] |", "|---|---|---|---|"]
+    for eta, pt, m in zip(ms.etas, ms.pitch_trim_cmd_norm, ms.lon):
+        lines.append(f"| {eta:g} | {pt:.4f} | {m.u0[0]:.4f} | {m.u0[1]:.3f} |")
+    last = ms.lon[-1]
+    du = last.u0[:2] - clean.u0[:2]
+    dy = last.y0 - clean.y0
+    full = ms.full[0]
+    beta = full.state_names.index("beta_rad")
+    nx = full.output_names.index("nx_g")
+    lines += ["", f"Trim shift at eta {ms.etas[-1]:g} (what `robust+trim` uses): elevator {du[0]:+.4f} rad "
+              f"({np.degrees(du[0]):+.2f} deg), throttle {du[1]:+.3f}; outputs "
+              + ", ".join(f"{n} {v:+.2g}" if abs(v) > 1e-6 else f"{n} 0" for n, v in zip(clean.output_names, dy))
+              + " (0: below 1e-6).",
+              "",
+              f"Clean model: beta trim {np.degrees(full.x0[beta]):.2f} deg; d nx_g / d beta "
+              f"{full.C[nx, beta]:.2f} g/rad. {cfg.h_ft:g} ft / {cfg.vc_kts:g} KCAS / flaps {cfg.flaps_deg:g}, "
+              "running-engine trim on the icing overlay (`linearize_models(StudyConfig())`)."]
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":
     raise SystemExit(table_main(MD, COMMAND, [("parity-f16-eq28", F16_INPUTS, eq28_block),
                                               ("parity-f16-pca", F16_INPUTS, pca_block),
-                                              ("parity-robust-curve", ROBUST_INPUTS, robust_curve_block)],
+                                              ("parity-robust-curve", ROBUST_INPUTS, robust_curve_block),
+                                              ("parity-dhc6-trims", DHC6_INPUTS, dhc6_trims_block)],
                                 sys.argv[1:]))
