@@ -15,7 +15,10 @@ and the settled replica's d beta-dot / d r, and the roll root of the step model 
 the referee both are compared with. ``iced-modes``: as ``tests/linear/test_iced_grid.py``, the
 DHC-6 with the icing overlay trimmed and linearized at 5000 ft / 100 KCAS for eta 0, 0.05, 0.1
 (``linearize_grid``, no validation): the short period's and the Dutch roll's natural frequencies
-and the roll root. Runs in about half a minute.
+and the roll root. ``fglin-dhc6``: as ``test_fglinearization_is_wrong_for_the_dhc6_propeller``,
+FGLinearization on the DHC-6 right after JSBSim's own trim (5000 ft / 120 KCAS; it does not
+converge after the running trim): its propeller-speed entries and short period against ours at
+the running trim. Runs in seconds.
 
     python docs/make_linear_tables.py
 """
@@ -47,6 +50,8 @@ COMMON = ("fdi_sim/aircraft", "fdi_sim/linear", "fdi_sim/operating_point.py", "f
 REDUCED_INPUTS = ("aircraft/f16", "aircraft/DHC6") + COMMON
 FGLIN_INPUTS = ("aircraft/f16",) + COMMON
 ICED_INPUTS = ("aircraft/DHC6",) + COMMON
+DHC6_FGLIN_INPUTS = ("aircraft/DHC6",) + COMMON
+DHC6_OP = OperatingPoint("DHC6", 5000.0, vc_kts=120.0)
 REDUCED_POINTS = (("F-16 5000 ft / 420 KTAS", OperatingPoint("f16", 5000.0, vt_kts=420.0), ()),
                   ("DHC-6 5000 ft / 120 KCAS (without the throttle run)", OperatingPoint("DHC6", 5000.0, vc_kts=120.0),
                    ("throttle_cmd_norm",)))
@@ -162,7 +167,39 @@ def iced_table() -> str:
     return "\n".join(lines)
 
 
+def _short_period(A: np.ndarray, idx: list[int]) -> complex:
+    """The fastest root of the longitudinal 4 x 4 block, upper half plane."""
+    z = max(np.linalg.eigvals(A[np.ix_(idx, idx)]), key=abs)
+    return complex(z.real, abs(z.imag))
+
+
+def dhc6_fglin_table() -> str:
+    """FGLinearization's propeller rows on the DHC-6 against our model's."""
+    ac = Aircraft("DHC6")
+    f = ac.fdm
+    f["ic/h-sl-ft"], f["ic/vc-kts"], f["ic/gamma-deg"], f["ic/psi-true-deg"] = 5000.0, 120.0, 0.0, 0.0
+    f["propulsion/set-running"] = -1
+    f.run_ic()
+    f.do_trim(1)  # JSBSim's own trim: after the running trim FGLinearization does not converge
+    jl = fglinearization(ac, allow_propeller=True)
+    i, j = jl.x_names.index("Rpm0"), jl.u_names.index("ThtlCmd")
+    fg_sp = _short_period(jl.A, [jl.x_names.index(n) for n in ("Vt", "Alpha", "Q", "Theta")])
+    m = linearize(Aircraft("DHC6"), DHC6_OP).model
+    n = m.state_names
+    r, n1, thr = n.index("prop_rpm"), n.index("n1_pct"), m.input_names.index("throttle_cmd_norm")
+    sp = _short_period(m.A, [n.index(s) for s in ("vt_fps", "alpha_rad", "q_radps", "theta_rad")])
+    lines = ["| DHC-6 5000 ft / 120 KCAS | d rpm-dot / d throttle [rpm/s] | d rpm-dot / d rpm [1/s] | "
+             "d rpm-dot / d N1 [rpm/s/%] | d N1-dot / d throttle [%/s] | short period [1/s] |", "|---|---|---|---|---|---|",
+             f"| FGLinearization (after JSBSim's trim) | {jl.B[i, j]:.0f} | {jl.A[i, i]:+.3f} | - | - | "
+             f"{fg_sp.real:.3f} ± {fg_sp.imag:.3f}j |",
+             f"| ours (running trim) | {m.B[r, thr]:.3g} | {m.A[r, r]:+.3f} | {m.A[r, n1]:.3g} | {m.B[n1, thr]:.3g} | "
+             f"{sp.real:.3f} ± {sp.imag:.3f}j |",
+             "", f"Short periods {abs(sp - fg_sp) / abs(fg_sp):.2%} apart.".replace("%", " %")]
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":
     raise SystemExit(table_main(MD, COMMAND, [("reduced-models", REDUCED_INPUTS, reduced_table),
                                               ("fglin-roll-root", FGLIN_INPUTS, fglin_table),
+                                              ("fglin-dhc6", DHC6_FGLIN_INPUTS, dhc6_fglin_table),
                                               ("iced-modes", ICED_INPUTS, iced_table)], sys.argv[1:]))
