@@ -1,6 +1,9 @@
-"""What Sidar's adaptive observer estimates on the iced interim Twin Otter, and how it fares on
-JSBSim flights, as the generated blocks ``adapted-entries`` and ``adaptive-jsbsim`` of
-docs/observers.md.
+"""The interim Twin Otter's modes, what Sidar's adaptive observer estimates on it iced, and how
+the observer fares on JSBSim flights, as the generated blocks ``interim-modes``,
+``adapted-entries`` and ``adaptive-jsbsim`` of docs/observers.md.
+
+``interim-modes``: the eigenvalues of the continuous interim model
+(``twin_otter_longitudinal_interim``), clean and at the eta of the studies below.
 
 The adaptive run of the NIS false-alarm study (``fig_far`` of docs/make_observer_figures.py, the
 same set-up: the interim longitudinal Twin Otter at 120 Hz, ZOH, the steady-state Kalman design
@@ -46,6 +49,8 @@ INPUTS = ("fdi_sim/detectors/adaptive_observer.py", "fdi_sim/detectors/kalman.py
           "fdi_sim/detectors/directional_observer.py", "fdi_sim/papers/twin_otter_interim.py", "fdi_sim/linear/model.py",
           "fdi_sim/linear/transform.py", "fdi_sim/decision/chi2.py", "fdi_sim/errors.py", "fdi_sim/units.py",
           "docs/make_observer_table.py")
+INTERIM_INPUTS = ("fdi_sim/papers/twin_otter_interim.py", "fdi_sim/linear/model.py", "fdi_sim/units.py",
+                  "fdi_sim/errors.py", "docs/make_observer_table.py")
 #: the flights (the sim loop without a detector bank, the log) and the observer's factory
 JSBSIM_INPUTS = ("aircraft", "fdi_sim/_aircraft", "fdi_sim/aircraft", "fdi_sim/sim", "fdi_sim/pilot", "fdi_sim/sensors",
                  "fdi_sim/scenario", "fdi_sim/flightlog", "fdi_sim/faults/injector.py", "fdi_sim/signals.py",
@@ -110,6 +115,17 @@ def render() -> str:
                      f"(discrete entry {_true(clean, iced, M, r, c):+.3f}) |")
     lines += ["", f"Relative change of the entry from the clean model, at every 120 Hz step of 300-600 s; eta {ETA:g}, "
               "seed 6; true change: of the continuous derivative (eta k) and of the discrete entry the observer adapts."]
+    return "\n".join(lines)
+
+
+def interim_table() -> str:
+    """Short period and phugoid of the continuous interim model, clean and iced."""
+    lines = ["| interim Twin Otter | short period [1/s] | phugoid [1/s] |", "|---|---|---|"]
+    for eta in (0.0, ETA):
+        z = np.linalg.eigvals(twin_otter_longitudinal_interim(eta).A)
+        up = sorted((w for w in z if w.imag > 0), key=abs)  # the two upper-half-plane roots, slow first
+        ph, sp = up[0], up[-1]
+        lines.append(f"| eta {eta:g} | {sp.real:.3f} ± {sp.imag:.3f}j | {ph.real:.3f} ± {ph.imag:.3f}j |")
     return "\n".join(lines)
 
 
@@ -186,6 +202,7 @@ def jsbsim_table() -> str:
 
 
 if __name__ == "__main__":
-    raise SystemExit(table_main(MD, "python docs/make_observer_table.py", [(BLOCK, INPUTS, render),
+    raise SystemExit(table_main(MD, "python docs/make_observer_table.py", [("interim-modes", INTERIM_INPUTS, interim_table),
+                                                                                   (BLOCK, INPUTS, render),
                                                                                    ("adaptive-jsbsim", JSBSIM_INPUTS,
                                                                                     jsbsim_table)], sys.argv[1:]))
