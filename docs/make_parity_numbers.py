@@ -48,6 +48,8 @@ from fdi_sim.papers.hagenblad_f16 import (  # noqa: E402
     PAPER_ISOLATION_PCA,
     PAPER_P_EQ28,
     PAPER_READING,
+    PAPER_THRESHOLD_PARITY,
+    PAPER_THRESHOLD_PCA,
     f16_design,
     f16_model,
     f16_parity_study,
@@ -139,7 +141,7 @@ def eq28_block() -> str:
               f"| P(5\\|5), Algorithm 1 simulated | {p55:.3f} ± {_se(p55, n):.3f} | {PAPER_ISOLATION_PARITY[4]:g} |",
               f"| P(3\\|3), Algorithm 1 simulated | {res.p_correct[2]:.3f} | {PAPER_ISOLATION_PARITY[2]:g} |",
               f"| P(correct) f1..f6, Algorithm 1 simulated | {_row(res.p_correct)} | {_row(PAPER_ISOLATION_PARITY)} |",
-              f"| h (5 % FA) [95 % CI] | {res.threshold.h:.3f} [{res.threshold.h_low:.3f}, {res.threshold.h_high:.3f}] | 9.3 |",
+              f"| h (5 % FA) [95 % CI] | {res.threshold.h:.3f} [{res.threshold.h_low:.3f}, {res.threshold.h_high:.3f}] | {PAPER_THRESHOLD_PARITY:g} |",
               f"| P(2\\|5), P(5\\|6): printed / unrounded ZOH model | {P[1, 4]:.4f} / {Pe[1, 4]:.4f}, "
               f"{P[4, 5]:.4f} / {Pe[4, 5]:.4f} | {PAPER_P_EQ28[1, 4]:.4f}, {PAPER_P_EQ28[4, 5]:.4f} |",
               f"| entries of the unrounded ZOH (vs printed eq. 23-24) off by more than the 4th decimal's rounding | "
@@ -147,7 +149,7 @@ def eq28_block() -> str:
               f"| P(1\\|3), P(5\\|6), eq. 14 with B_v = I_5, Q = 1e-4 (unit sizes) | {P_noisy[0, 2]:.2f}, "
               f"{P_noisy[4, 5]:.2f} | {PAPER_P_EQ28[0, 2]:.4f}, {PAPER_P_EQ28[4, 5]:.4f} |",
               f"| h (5 % FA) designed for R only, simulated with Q = 1e-4 on every state [95 % CI] | "
-              f"{th_mis.h:.0f} [{th_mis.h_low:.0f}, {th_mis.h_high:.0f}] | 9.3 |",
+              f"{th_mis.h:.0f} [{th_mis.h_low:.0f}, {th_mis.h_high:.0f}] | {PAPER_THRESHOLD_PARITY:g} |",
               f"| singular values of the stacked mu_bar | {', '.join(f'{s:.4g}' for s in sv[:3])}, "
               f"{sv[3] / sv[0]:.0e} x the first | |",
               f"| cos(mu_bar_2, mu_bar_5), \\|mu_bar_5\\| | {cos25:.4f}, {np.linalg.norm(mu[4]):.2f} | |",
@@ -201,7 +203,7 @@ def pca_block() -> str:
              "",
              "| PCA, 30 s runs | P(correct) f1..f6 | h (5 % FA) |", "|---|---|---|",
              f"| ours | {_row(res.p_correct)} | {res.threshold.h:.2f} |",
-             f"| paper | {_row(PAPER_ISOLATION_PCA)} | 9.7 |",
+             f"| paper | {_row(PAPER_ISOLATION_PCA)} | {PAPER_THRESHOLD_PCA:g} |",
              "",
              f"L = {WINDOW_L}, n_r = {N_RESIDUALS}, {N_TRAIN} training windows per case (fault-free and each "
              f"fault's signature), {N_WINDOWS} test windows per case, each column from runs of its length (3 s: "
