@@ -1,5 +1,5 @@
 """The default grids' linearization and validation summary, as the generated block ``default-grids``
-of docs/linear.md.
+of docs/linear.md, and the F-16 grid's FGLinearization comparison as the block ``fglin-grid``.
 
 Runs what ``fdi-sim linearize f16``, ``fdi-sim linearize DHC6`` and ``fdi-sim linearize DHC6
 --grid iced`` run (``linearize_grid(resolve_grid(spec, aircraft))`` with the doublet validation
@@ -8,7 +8,11 @@ grid: the points trimmed (and why the others are not), the bar (the step model w
 identified N1 lag, doublets inside the smooth range of JSBSim's tables), the doublets made
 smaller and the kinks that made them so, and the configured doublets with the step model and with
 ZOH. The summaries are the ones ``fdi-sim linearize`` prints and ``tests/linear/test_default_grids.py``
-asserts. 77 points: about 1.5 min niced on a busy 2-core machine.
+asserts. ``fglin-grid``, from the same F-16 schedule (``info["fglin"]`` of every point): the
+largest eigenvalue difference of FGLinearization's procedure replayed with its passes settled,
+stock FGLinearization's worst mode against ours (the roll root and the rest), and the relative
+distance of our and of FGLinearization's roll root to the simulation's own (the step model's
+poles mapped back by ln(z)/dt). 77 points: about 1.5 min niced on a busy 2-core machine.
 
     python docs/make_linear_grid_table.py
 """
@@ -35,6 +39,11 @@ COMMAND = "python docs/make_linear_grid_table.py"
 INPUTS = ("aircraft", "fdi_sim/_aircraft", "fdi_sim/aircraft", "fdi_sim/linear", "fdi_sim/operating_point.py",
           "fdi_sim/isa.py", "fdi_sim/units.py", "fdi_sim/errors.py", "fdi_sim/data.py", "fdi_sim/threads.py",
           "docs/make_linear_grid_table.py")
+FGLIN_BLOCK = "fglin-grid"
+#: the F-16 grid only: its grid file, the aircraft layer and the linearizer
+FGLIN_INPUTS = ("aircraft/f16/grid.toml", "fdi_sim/aircraft", "fdi_sim/linear", "fdi_sim/operating_point.py",
+                "fdi_sim/isa.py", "fdi_sim/units.py", "fdi_sim/errors.py", "fdi_sim/threads.py",
+                "docs/make_linear_grid_table.py")
 #: (row label, aircraft, --grid spec as given to fdi-sim linearize)
 GRIDS = (("F-16", "f16", None), ("DHC-6", "DHC6", None), ("DHC-6 iced", "DHC6", "iced"))
 
@@ -123,30 +132,65 @@ def _row(label: str, schedule, seconds: float) -> str:
     return f"| {label} ({_axes(pts)}) | {trim} | {bar} | {made} | {cell} | {zcell} |"
 
 
-def render() -> str:
+def fglin_render(schedule) -> str:
+    """The F-16 grid against FGLinearization: settled replay, stock worst modes, roll root vs the simulation."""
+    ok = schedule.ok_points
+    fg = {_where(p): p.info["fglin"] for p in ok}
+
+    def is_roll(k: str) -> bool:
+        return k.startswith("roll")
+
+    def worst(pred) -> tuple[float, str, str]:
+        # (relative difference, mode, point) of the worst mode matching pred; zero roots have none
+        return max((v, k.rsplit(" ", 1)[0], w) for w, f in fg.items() for k, v in f["per_mode"].items()
+                   if pred(k) and abs(float(k.split()[-1])) > 1e-3)
+
+    settled = max(f["settled"]["max_rel"] for f in fg.values())
+    r_fg, _, r_at = worst(is_roll)
+    o_fg, o_mode, o_at = worst(lambda k: not is_roll(k))
+    roll = {w: next(k for k in f["per_mode"] if is_roll(k)) for w, f in fg.items()}
+    ours = [f["sim"]["ours_vs_sim"][roll[w]] for w, f in fg.items()]
+    theirs = [f["sim"]["fglin_vs_sim"][roll[w]] for w, f in fg.items()]
+    lines = ["| F-16 default grid, " + f"{len(ok)} points | relative eigenvalue difference |", "|---|---|",
+             f"| FGLinearization's procedure, passes settled, against ours (worst mode) | {settled:.1e} |",
+             f"| stock FGLinearization against ours, roll root (worst point) | {r_fg:.1%} ({r_at}) |",
+             f"| stock FGLinearization against ours, every other mode (worst) | {o_fg:.1%} ({o_mode}, {o_at}) |",
+             f"| ours against the simulation's roll pole (step model, ln(z)/dt) | {min(ours):.1%} - {max(ours):.1%} |",
+             f"| stock FGLinearization against the simulation's roll pole | {min(theirs):.1%} - {max(theirs):.1%} |"]
+    return "\n".join(lines).replace("%", " %")
+
+
+def render() -> tuple[str, str]:
+    """The ``default-grids`` and ``fglin-grid`` bodies, from one linearization of each grid."""
     rows, times = [], []
+    fglin = ""
     for label, aircraft, spec in GRIDS:
         grid = resolve_grid(spec, aircraft)
         t0 = time.perf_counter()
         schedule = linearize_grid(grid, validate=True, check_fglin=None)
         times.append((label, time.perf_counter() - t0, len(grid.points)))
         rows.append(_row(label, schedule, times[-1][1]))
+        if aircraft == "f16":
+            fglin = fglin_render(schedule)
     lines = ["| grid | points | bar: step model (+ N1 lag), smooth-range doublets | doublets made smaller | "
              "configured doublets | ZOH, configured |", "|---|---|---|---|---|---|"] + rows
     lines += ["", f"Bar: every output's normalized rms error below {100 * NRMSE_BAR:g} %; configured doublets: the "
               "step model as it is (no N1 lag), all doublets at their configured size. Linearized and validated in "
               + ", ".join(f"{t:.0f} s ({label}, {n} points)" for label, t, n in times)
               + " (niced, on a 2-core machine shared with other jobs)."]
-    return "\n".join(lines)
+    return "\n".join(lines), fglin
 
 
 def main() -> int:
     t0 = time.perf_counter()
-    stamp = make_stamp(BLOCK, COMMAND, INPUTS)
-    body = render()
-    MD.write_text(replace_block(MD.read_text(), stamp, body))
-    print(body)
-    print(f"wrote the {BLOCK} block of {MD} in {time.perf_counter() - t0:.0f} s")
+    stamps = make_stamp(BLOCK, COMMAND, INPUTS), make_stamp(FGLIN_BLOCK, COMMAND, FGLIN_INPUTS)
+    bodies = render()
+    text = MD.read_text()
+    for stamp, body in zip(stamps, bodies):
+        text = replace_block(text, stamp, body)
+        print(body)
+    MD.write_text(text)
+    print(f"wrote the {BLOCK} and {FGLIN_BLOCK} blocks of {MD} in {time.perf_counter() - t0:.0f} s")
     return 0
 
 
