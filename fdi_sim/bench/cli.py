@@ -10,6 +10,7 @@ from typing import Any
 # one JSON fallback for numpy values in both commands
 from fdi_sim.bench.suite import LATEST
 from fdi_sim.study.cli import _jsonable
+from fdi_sim.study.spec import FULL_LOG_BYTES_PER_H
 from fdi_sim.units import S_PER_H
 
 #: the results of a benchmark run, written into its folder
@@ -58,7 +59,8 @@ def add_parser(sub: Any) -> None:
     r.add_argument("--aircraft", default=None, help="only this aircraft's cases (f16, DHC6)")
     r.add_argument("--per-group", type=int, default=None, metavar="N", help="at most N cases per group and size")
     r.add_argument("--full-logs", action="store_true", help="keep the 120 Hz sensor, command and truth topics too "
-                   "(about 0.5 GB per flight hour: what `fdi-sim export` gives a learned detector); a folder of its own")
+                   f"(up to {FULL_LOG_BYTES_PER_H / 1e9:.1f} GB per flight hour: what `fdi-sim export` gives a learned "
+                   "detector); a folder of its own")
     r.add_argument("--out", default=None, help="results folder (default: bench/<suite>.<bank>); the same folder "
                    "resumes and grows")
     r.add_argument("--workers", type=int, default=None, help="local cluster workers (default: the cores)")

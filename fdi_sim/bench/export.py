@@ -25,8 +25,8 @@ Export (reads a benchmark results folder's logs and labels only; flies nothing):
                             to ``grid.<aircraft>.<hash of the columns>.parquet``
 
 A benchmark run keeps the FDI topics (statistics at the detector rate) by default; with
-``--full-logs`` the 120 Hz sensor, command and truth topics too (about 0.5 GB per flight hour),
-which is what a learned detector trains on.
+``--full-logs`` the 120 Hz sensor, command and truth topics too (their size per flight hour is
+:data:`fdi_sim.study.spec.FULL_LOG_BYTES_PER_H`), which is what a learned detector trains on.
 
 External scores (``fdi-sim bench score``): Parquet or CSV with columns ``case`` (string), ``t_s``
 (seconds of the case's log clock), ``score`` (float, larger = more faulty) and/or ``alarm`` (0/1),

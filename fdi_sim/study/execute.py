@@ -45,14 +45,10 @@ from typing import Any, Iterator
 
 from fdi_sim import signals
 from fdi_sim.errors import StudyError
-from fdi_sim.study.spec import Study, design_groups, scenario_toml
+from fdi_sim.study.spec import FULL_LOG_BYTES_PER_H, STATISTICS_BYTES_PER_H, Study, design_groups, scenario_toml
 from fdi_sim.units import S_PER_H
 
-#: bytes per flight hour of a run's FDI topics without residuals (measured: 872,613 B for a
-#: 300 s DHC-6 flight with the default bank at 20 Hz) and of a full 120 Hz log (issue 14's 0.5 TB
-#: per 1,000 h); the disk check uses them with a 25 % margin
-STATISTICS_BYTES_PER_H = 10.5e6
-FULL_LOG_BYTES_PER_H = 0.5e9
+#: the disk check's margin on the log sizes (spec.STATISTICS_BYTES_PER_H, spec.FULL_LOG_BYTES_PER_H)
 DISK_MARGIN = 1.25
 #: seconds the client waits for a scheduler to answer
 CONNECT_TIMEOUT_S = 5.0

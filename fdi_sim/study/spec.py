@@ -64,12 +64,22 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
+#: bytes per flight hour of a run's FDI topics without residuals (measured: 872,613 B for a
+#: 300 s DHC-6 flight with the default bank at 20 Hz) and of a full 120 Hz log (issue 14's 0.5 TB
+#: per 1,000 h); the disk check uses them with a margin, the help texts quote them, and
+#: tests/study/test_execute.py checks both against a flown run's log
+STATISTICS_BYTES_PER_H = 10.5e6
+FULL_LOG_BYTES_PER_H = 0.5e9
+
+
 class OutputSection(_Strict):
     """What each run keeps besides its summary record."""
 
     statistics: bool = Field(default=True, description="the run's FDI topics (statistics at the detector rate) as "
-                             "an MCAP log, for re-scoring at other thresholds (~10 MB per flight hour)")
-    full_logs: bool = Field(default=False, description="the 120 Hz topics too (~0.5 GB per flight hour)")
+                             "an MCAP log, for re-scoring at other thresholds "
+                             f"(about {STATISTICS_BYTES_PER_H / 1e6:.1f} MB per flight hour)")
+    full_logs: bool = Field(default=False,
+                            description=f"the 120 Hz topics too (up to {FULL_LOG_BYTES_PER_H / 1e9:.1f} GB per flight hour)")
 
 
 class StudyModel(_Strict):

@@ -252,6 +252,30 @@ def test_study_that_needs_more_disk_than_free_is_refused(tmp_path: Path) -> None
     assert not done_runs(tmp_path / "out")
 
 
+def test_the_disk_check_log_sizes_are_what_a_run_writes(tmp_path: Path) -> None:
+    """The bytes per flight hour the disk check and the help texts use (spec.STATISTICS_BYTES_PER_H,
+    spec.FULL_LOG_BYTES_PER_H) against one flown 60-s DHC-6 run with the default bank: each size must
+    cover the measured one within the check's margin (never refuse too little) and not exceed it
+    2-fold (never refuse a study that fits)."""
+    from fdi_sim.study.execute import DISK_MARGIN
+    from fdi_sim.study.spec import FULL_LOG_BYTES_PER_H, STATISTICS_BYTES_PER_H
+
+    measured = {}
+    for full, budget in ((False, STATISTICS_BYTES_PER_H), (True, FULL_LOG_BYTES_PER_H)):
+        text = DHC6_FA.replace("duration_s = 20.0", "duration_s = 60.0")
+        if full:
+            text = text.replace("[bank]", "[output]\nfull_logs = true\n[bank]")
+        (tmp_path / str(full)).mkdir()
+        st = load_study(_study(tmp_path / str(full), text, 1))
+        out = tmp_path / f"out_{full}"
+        fly_study(st, out, workers=1, progress=False)
+        (log,) = (out / "runs").glob("*.mcap")
+        per_h = log.stat().st_size / (60.0 / 3600.0)
+        measured[full] = per_h
+        assert per_h <= budget * DISK_MARGIN and budget <= 2.0 * per_h, (full, per_h, budget)
+    assert measured[True] > 10 * measured[False]
+
+
 def test_cli_json(dhc6, tmp_path: Path) -> None:
     """`fdi-sim study --json` on a finished study: the statistics as one JSON object."""
     st, _, out, _ = dhc6
