@@ -258,10 +258,11 @@ def test_the_disk_check_log_sizes_are_what_a_run_writes(tmp_path: Path) -> None:
     cover the measured one within the check's margin (never refuse too little) and not exceed it
     2-fold (never refuse a study that fits)."""
     from fdi_sim.study.execute import DISK_MARGIN
+    from fdi_sim.units import S_PER_H
     from fdi_sim.study.spec import FULL_LOG_BYTES_PER_H, STATISTICS_BYTES_PER_H
 
-    measured = {}
-    for full, budget in ((False, STATISTICS_BYTES_PER_H), (True, FULL_LOG_BYTES_PER_H)):
+    measured_bytes_per_h = {}
+    for full, budget_bytes_per_h in ((False, STATISTICS_BYTES_PER_H), (True, FULL_LOG_BYTES_PER_H)):
         text = DHC6_FA.replace("duration_s = 20.0", "duration_s = 60.0")
         if full:
             text = text.replace("[bank]", "[output]\nfull_logs = true\n[bank]")
@@ -270,10 +271,11 @@ def test_the_disk_check_log_sizes_are_what_a_run_writes(tmp_path: Path) -> None:
         out = tmp_path / f"out_{full}"
         fly_study(st, out, workers=1, progress=False)
         (log,) = (out / "runs").glob("*.mcap")
-        per_h = log.stat().st_size / (60.0 / 3600.0)
-        measured[full] = per_h
-        assert per_h <= budget * DISK_MARGIN and budget <= 2.0 * per_h, (full, per_h, budget)
-    assert measured[True] > 10 * measured[False]
+        bytes_per_h = log.stat().st_size / (st.model.duration_s / S_PER_H)
+        measured_bytes_per_h[full] = bytes_per_h
+        assert bytes_per_h <= budget_bytes_per_h * DISK_MARGIN, (full, bytes_per_h, budget_bytes_per_h)
+        assert budget_bytes_per_h <= 2.0 * bytes_per_h, (full, bytes_per_h, budget_bytes_per_h)
+    assert measured_bytes_per_h[True] > 10 * measured_bytes_per_h[False]
 
 
 def test_cli_json(dhc6, tmp_path: Path) -> None:
